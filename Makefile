@@ -1,0 +1,31 @@
+# gpis-harness: set-up, tests and the pictures of the scene library.
+PYTHON ?= python3
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed
+
+.PHONY: setup test test-all scenes bench clean
+
+setup: $(STAMP)
+
+# Reinstall only when the package metadata changed (editable install covers code).
+$(STAMP): pyproject.toml
+	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e '.[dev,cluster]'
+	touch $(STAMP)
+
+test: setup
+	$(BIN)/python -m pytest -q
+
+test-all: setup
+	$(BIN)/python -m pytest -q --runslow
+
+scenes: setup
+	$(BIN)/gpis-harness scenes render --out results/scenes
+
+bench: setup
+	$(BIN)/gpis-harness bench all
+
+clean:
+	rm -rf $(VENV) .pytest_cache .hypothesis results/scenes

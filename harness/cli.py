@@ -1,0 +1,150 @@
+"""The command line: parse, call, print. Bad input exits 2 with one line on stderr."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import traceback
+from pathlib import Path
+
+from harness.errors import InputError
+
+PROG = "gpis-harness"
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse that reports usage errors as one line (exit 2) instead of a usage block."""
+
+    def error(self, message: str):
+        command = self.prog.removeprefix(PROG).strip()
+        raise InputError(f"command line{': ' + command if command else ''}", None, message)
+
+
+def _seed(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"seed must be a non-negative integer, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"seed must be a non-negative integer, got {value}")
+    return value
+
+
+def _scenes_list(args) -> int:
+    from harness.scene import library_names, load_scene
+
+    names = library_names()
+    width = max((len(n) for n in names), default=0)
+    for name in names:
+        print(f"{name:<{width}}  {load_scene(name).description}")
+    return 0
+
+
+def _scenes_check(args) -> int:
+    from harness.scene import load_scene
+
+    for item in args.scene:
+        scene = load_scene(item)
+        print(f"{scene.source}: ok ({scene.name}, grid {scene.grid.size} x {scene.grid.size})")
+    return 0
+
+
+def _render(scene_arg: str, seed: int, out: Path) -> Path:
+    """Observe, fit and draw one scene; returns the PNG written."""
+    import matplotlib.pyplot as plt
+
+    from harness.belief import build_belief
+    from harness.plots import scene_figure
+    from harness.scene import load_scene
+    from harness.seeding import stream
+
+    scene = load_scene(scene_arg)
+    belief = build_belief(scene, stream(seed, scene.name, 0, "sensor"))
+    fig = scene_figure(belief, stream(seed, scene.name, 0, "picture"))
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out
+
+
+def _scenes_show(args) -> int:
+    from harness.scene import load_scene
+
+    scene = load_scene(args.scene)  # validate before any work
+    out = Path(args.out) if args.out else Path("results") / "scenes" / f"{scene.name}.png"
+    if out.suffix.lower() != ".png":
+        raise InputError("--out", None, f"{out}: the picture is written as PNG; give a .png file name")
+    print(_render(args.scene, args.seed, out))
+    return 0
+
+
+def _scenes_render(args) -> int:
+    from harness.scene import library_names, load_scene
+
+    names = library_names()
+    for name in names:
+        load_scene(name)
+    for name in names:
+        print(_render(name, args.seed, Path(args.out) / f"{name}.png"), flush=True)
+    return 0
+
+
+def _bench(args) -> int:
+    from harness import bench
+
+    results = bench.run(args.which, exact_max_mb=args.exact_max_mb, sizes=args.sizes)
+    if args.json:
+        print(json.dumps(results, indent=2))
+    else:
+        print(bench.format_results(results))
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog=PROG, description="Grasp planning under shape uncertainty, validated by physics.")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    scenes = sub.add_parser("scenes", help="the scene library: list, check, show, render")
+    ssub = scenes.add_subparsers(dest="scenes_command", required=True, parser_class=_Parser)
+    p = ssub.add_parser("list", help="name and description of every library scene")
+    p.set_defaults(func=_scenes_list)
+    p = ssub.add_parser("check", help="validate scene files (or library names)")
+    p.add_argument("scene", nargs="+", help="library name or path to a scene file")
+    p.set_defaults(func=_scenes_check)
+    p = ssub.add_parser("show", help="picture of one scene's belief (PNG)")
+    p.add_argument("scene", help="library name or path to a scene file")
+    p.add_argument("--seed", type=_seed, default=0, help="experiment seed (default 0)")
+    p.add_argument("--out", help="PNG file (default results/scenes/NAME.png)")
+    p.set_defaults(func=_scenes_show)
+    p = ssub.add_parser("render", help="pictures of every library scene into a folder")
+    p.add_argument("--out", default="results/scenes", help="folder (default results/scenes)")
+    p.add_argument("--seed", type=_seed, default=0, help="experiment seed (default 0)")
+    p.set_defaults(func=_scenes_render)
+
+    bench = sub.add_parser("bench", help="benchmarks, measured as ratios in one run")
+    bench.add_argument("which", nargs="?", default="all", choices=["sampling", "all"])
+    bench.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    bench.add_argument("--exact-max-mb", type=float, default=2500.0,
+                       help="skip the dense exact sampler when its covariance exceeds this (default 2500)")
+    bench.add_argument("--sizes", type=lambda s: [int(v) for v in s.split(",")], default=None,
+                       help="grid sizes M, comma-separated (default 25,40,55,70,100,200)")
+    bench.set_defaults(func=_bench)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of ``gpis-harness``; returns the exit code."""
+    try:
+        args = build_parser().parse_args(argv)
+        return int(args.func(args) or 0)
+    except InputError as exc:
+        print(f"{PROG}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"{PROG}: interrupted", file=sys.stderr)
+        return 130
+    except Exception:  # an internal error: the traceback helps the bug report
+        traceback.print_exc()
+        print(f"{PROG}: internal error (please report it with the traceback above)", file=sys.stderr)
+        return 1

@@ -1,0 +1,550 @@
+"""Scene files (TOML) -> validated Scene values; the built-in scene library.
+
+Every check happens at load time, before any work: a bad file raises InputError
+naming the file, the field and what is wrong. ``docs/scenes.md`` documents the format.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import os
+import re
+import tomllib
+from dataclasses import dataclass
+from functools import cached_property
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import shapely
+import shapely.affinity
+from scipy import ndimage
+from shapely.geometry import Point, Polygon, box
+from shapely.geometry.base import BaseGeometry
+
+from harness.errors import InputError
+from harness.geometry import Grid, grid_sdf, inside_region, largest_region, polygons
+from harness.sensor import REGION_KINDS, Region, SensorModel
+
+LIBRARY = Path(os.environ.get("GPIS_HARNESS_SCENES", Path(__file__).resolve().parent.parent / "scenes"))
+
+#: A shape must keep this many cells away from the grid border (room for the jaws).
+BORDER_CELLS = 2.0
+#: The shape's largest inscribed circle must have at least this radius, in cells.
+MIN_INSCRIBED_CELLS = 1.0
+SHAPE_TYPES = ("polygon", "outline", "rectangle", "disk", "ring", "capsule", "union", "random")
+
+
+@dataclass(frozen=True)
+class GPISSettings:
+    """Hyperparameters (metres) and fitting choices of the scene's GPIS."""
+
+    lengthscale: float
+    scale: float
+    prior_mean: float
+    hyperparameters: str = "fixed"  # "fixed" or "ml" (ML-II fit, starting from the values above)
+    use_gradients: bool = True
+    active_set: bool = True
+    active_band: float = 0.0
+    active_spacing: float = 0.0
+
+
+@dataclass(frozen=True)
+class Physics:
+    """Physical properties of the extruded object."""
+
+    thickness: float = 0.03
+    density: float = 400.0
+    friction: float = 0.5
+
+
+@dataclass(frozen=True)
+class Gripper:
+    """Parallel-jaw gripper geometry (metres)."""
+
+    opening: float = 0.10
+    jaw_width: float = 0.01
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A validated scene: true shape, grid, sensor, GPIS settings, physics, gripper."""
+
+    name: str
+    description: str
+    source: str
+    grid: Grid
+    shape: Polygon
+    truncation: float
+    sensor: SensorModel
+    gpis: GPISSettings
+    physics: Physics
+    gripper: Gripper
+
+    @cached_property
+    def true_sdf(self) -> np.ndarray:
+        """Exact signed distance of the true shape at the cell centres, truncated, (M, M)."""
+        return grid_sdf(self.shape, self.grid, self.truncation)
+
+    def with_grid_size(self, size: int) -> "Scene":
+        """The same physical scene on a finer or coarser grid; lengths given in cells
+        in the file are NOT rescaled (they were converted to metres at load)."""
+        from dataclasses import replace
+
+        return replace(self, grid=Grid(size, self.grid.extent))
+
+
+# ---------------------------------------------------------------------------
+# Finding and loading scenes
+
+
+def library_names() -> list[str]:
+    """Names of the scenes in the library, sorted."""
+    if not LIBRARY.is_dir():
+        return []
+    return sorted(p.stem for p in LIBRARY.glob("*.toml"))
+
+
+def resolve(name_or_path: str) -> Path:
+    """The file of a library scene name or a path; InputError when neither exists."""
+    candidate = Path(name_or_path)
+    if candidate.suffix == ".toml" or os.sep in name_or_path or candidate.exists():
+        if not candidate.is_file():
+            raise InputError(name_or_path, None, "no such scene file")
+        return candidate
+    path = LIBRARY / f"{name_or_path}.toml"
+    if not path.is_file():
+        known = ", ".join(library_names()) or "none"
+        raise InputError(name_or_path, None, f"unknown scene (library: {known})")
+    return path
+
+
+def load_scene(name_or_path: str | Path) -> Scene:
+    """Load and validate a scene by library name or path."""
+    path = resolve(str(name_or_path))
+    source = str(path)
+    try:
+        text = path.read_bytes().decode("utf-8")
+        data = tomllib.loads(text)
+    except UnicodeDecodeError:
+        raise InputError(source, None, "not a text file (invalid UTF-8)") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(source, None, f"invalid TOML: {exc}") from None
+    except OSError as exc:
+        raise InputError(source, None, f"cannot read: {exc.strerror or exc}") from None
+    return parse_scene(data, source=source, base_dir=path.parent, default_name=path.stem)
+
+
+def parse_scene(data: dict, source: str, base_dir: Path, default_name: str = "scene") -> Scene:
+    """Validate a parsed scene document (see ``docs/scenes.md``)."""
+    root = _Table(data, "", source)
+    name = root.string("name", default_name)
+    description = root.string("description", "")
+
+    g = root.table("grid")
+    size = g.integer("size", lo=8, hi=1024)
+    extent = g.number("extent", lo=0.0, hi=100.0, lo_open=True)
+    cell = extent / size
+    truncation = g.length("truncation", cell, default=3 * cell, lo=cell)
+    g.finish()
+    grid = Grid(size, extent)
+
+    shape = _shape(root.table("shape"), cell, base_dir)
+    _check_shape_on_grid(shape, grid, source)
+
+    sensor = _sensor(root.table("sensor", required=False), cell, base_dir)
+    gpis = _gpis(root.table("gpis", required=False), cell, truncation)
+
+    p = root.table("physics", required=False)
+    physics = Physics(
+        thickness=p.length("thickness", cell, default=Physics.thickness, lo=0.0, hi=1.0),
+        density=p.number("density", Physics.density, lo=1.0, hi=30000.0),
+        friction=p.number("friction", Physics.friction, lo=0.0, hi=10.0),
+    )
+    p.finish()
+    gr = root.table("gripper", required=False)
+    gripper = Gripper(
+        opening=gr.length("opening", cell, default=Gripper.opening, lo=0.0, hi=10.0),
+        jaw_width=gr.length("jaw_width", cell, default=Gripper.jaw_width, lo=0.0, hi=10.0),
+    )
+    gr.finish()
+    root.finish()
+    return Scene(name, description, source, grid, shape, truncation, sensor, gpis, physics, gripper)
+
+
+# ---------------------------------------------------------------------------
+# Shapes
+
+
+def _shape(t: "_Table", cell: float, base_dir: Path) -> BaseGeometry:
+    kind = t.string("type", choices=SHAPE_TYPES)
+    if kind == "polygon":
+        exterior = t.points("exterior")
+        holes = [t.points_value(h, f"holes[{k}]") for k, h in enumerate(t.list("holes", []))]
+        geom = _valid_polygon(t, Polygon(exterior, holes), "exterior")
+    elif kind == "outline":
+        geom = _outline(t, cell, base_dir)
+    elif kind == "rectangle":
+        w = t.length("width", cell, lo=0.0)
+        h = t.length("height", cell, lo=0.0)
+        c = t.point("center", (0.0, 0.0))
+        angle = t.number("angle", 0.0)
+        geom = shapely.affinity.rotate(box(-w / 2, -h / 2, w / 2, h / 2), angle, origin=(0, 0), use_radians=True)
+        geom = shapely.affinity.translate(geom, *c)
+    elif kind == "disk":
+        r = t.length("radius", cell, lo=0.0)
+        geom = Point(t.point("center", (0.0, 0.0))).buffer(r, quad_segs=64)
+    elif kind == "ring":
+        r_out = t.length("outer_radius", cell, lo=0.0)
+        r_in = t.length("inner_radius", cell, lo=0.0)
+        if r_in >= r_out:
+            raise t.error("inner_radius", f"must be smaller than outer_radius ({r_in:g} >= {r_out:g} m)")
+        c = Point(t.point("center", (0.0, 0.0)))
+        geom = c.buffer(r_out, quad_segs=64).difference(c.buffer(r_in, quad_segs=64))
+    elif kind == "capsule":
+        a, b = t.point("start"), t.point("end")
+        r = t.length("radius", cell, lo=0.0)
+        geom = shapely.LineString([a, b]).buffer(r, quad_segs=32) if a != b else Point(a).buffer(r, quad_segs=64)
+    elif kind == "union":
+        parts = [_shape(p, cell, base_dir) for p in t.tables("parts", min_count=1)]
+        cutouts = [_shape(p, cell, base_dir) for p in t.tables("cutouts", min_count=0)]
+        geom = shapely.union_all(parts)
+        if cutouts:
+            geom = geom.difference(shapely.union_all(cutouts))
+    else:
+        geom = _random_shape(t, cell)
+    angle = t.number("rotate", 0.0)
+    offset = t.point("offset", (0.0, 0.0))
+    t.finish()
+    if angle:
+        geom = shapely.affinity.rotate(geom, angle, origin=(0, 0), use_radians=True)
+    if offset != (0.0, 0.0):
+        geom = shapely.affinity.translate(geom, *offset)
+    if geom.is_empty or geom.area <= 0.0:
+        raise t.error(None, "shape is empty (zero area)")
+    return geom
+
+
+def _valid_polygon(t: "_Table", geom: Polygon, field: str) -> Polygon:
+    if not geom.is_valid:
+        reason = shapely.is_valid_reason(geom)
+        m = re.match(r"([^\[]+)\[([-0-9.eE+]+) ([-0-9.eE+]+)\]", reason)
+        if m:
+            reason = f"{m.group(1).lower()} at ({float(m.group(2)):.4g}, {float(m.group(3)):.4g})"
+        raise t.error(field, f"invalid polygon: {reason}")
+    return geom
+
+
+def _outline(t: "_Table", cell: float, base_dir: Path) -> Polygon:
+    rel = t.string("path")
+    scale = t.number("scale", lo=0.0, lo_open=True, hi=100.0)
+    centring = t.string("center", "centroid", choices=("centroid", "bbox", "none"))
+    flip_y = t.boolean("flip_y", False)
+    path = (base_dir / rel).resolve()
+    try:
+        with open(path, newline="", encoding="utf-8") as fh:
+            rows = list(csv.reader(fh))
+    except (OSError, UnicodeDecodeError) as exc:
+        detail = exc.strerror if isinstance(exc, OSError) and exc.strerror else type(exc).__name__
+        raise t.error("path", f"cannot read outline {path}: {detail}") from None
+    if not rows or [c.strip().lower() for c in rows[0]] != ["x", "y"]:
+        raise t.error("path", f"outline {path}: first line must be the header 'x,y'")
+    vertices = []
+    for line_no, row in enumerate(rows[1:], start=2):
+        if not row or all(not c.strip() for c in row):
+            continue
+        try:
+            if len(row) != 2:
+                raise ValueError
+            x, y = float(row[0]), float(row[1])
+            if not (math.isfinite(x) and math.isfinite(y)):
+                raise ValueError
+        except ValueError:
+            raise t.error("path", f"outline {path}, line {line_no}: expected two finite numbers") from None
+        vertices.append((x, -y if flip_y else y))
+    if len(vertices) < 3:
+        raise t.error("path", f"outline {path}: needs at least 3 vertices, has {len(vertices)}")
+    geom = _valid_polygon(t, Polygon(np.asarray(vertices) * scale), "path")
+    if centring == "centroid":
+        c = geom.centroid
+        geom = shapely.affinity.translate(geom, -c.x, -c.y)
+    elif centring == "bbox":
+        x0, y0, x1, y1 = geom.bounds
+        geom = shapely.affinity.translate(geom, -(x0 + x1) / 2, -(y0 + y1) / 2)
+    return geom
+
+
+def _random_shape(t: "_Table", cell: float) -> Polygon:
+    """The largest region below zero of |x|^2/R^2 - 1 + amplitude * xi(x), where xi is a
+    smooth unit-variance Gaussian random field of correlation length ``lengthscale``.
+
+    The field lives on a fixed 256 x 256 lattice over [-2R, 2R]^2, so the shape depends
+    only on its own parameters, never on the scene's grid.
+    """
+    seed = t.integer("seed", lo=0, hi=2**63 - 1)
+    radius = t.length("radius", cell, lo=0.0)
+    lengthscale = t.length("lengthscale", cell, default=0.5 * radius, lo=0.0)
+    amplitude = t.number("amplitude", 0.5, lo=0.0, hi=5.0)
+    n = 256
+    lattice = Grid(n, 4 * radius)
+    rng = np.random.default_rng(seed)
+    xi = ndimage.gaussian_filter(rng.standard_normal((n, n)), lengthscale / lattice.cell, mode="wrap")
+    xi /= xi.std()
+    r2 = (lattice.points**2).sum(axis=1).reshape(n, n) / radius**2
+    region = largest_region(inside_region(r2 - 1.0 + amplitude * xi, lattice))
+    if region.is_empty:
+        raise t.error("amplitude", "the random field has no region below zero; lower the amplitude")
+    return region.simplify(lattice.cell / 4)
+
+
+def _check_shape_on_grid(shape: BaseGeometry, grid: Grid, source: str) -> None:
+    field = "shape"
+    parts = polygons(shape)
+    if len(parts) != 1:
+        raise InputError(source, field, f"shape has {len(parts)} disconnected parts; an object must be one piece")
+    limit = 0.5 * grid.extent - BORDER_CELLS * grid.cell
+    x0, y0, x1, y1 = shape.bounds
+    worst = max(abs(x0), abs(y0), abs(x1), abs(y1))
+    if worst > limit:
+        raise InputError(
+            source, field,
+            f"shape outside the grid: it reaches {worst:.4g} m from the centre, the grid allows "
+            f"{limit:.4g} m (half the extent less {BORDER_CELLS:g} cells)",
+        )
+    radius = shapely.maximum_inscribed_circle(shape, grid.cell / 20).length
+    if radius < MIN_INSCRIBED_CELLS * grid.cell:
+        raise InputError(
+            source, "grid.size",
+            f"grid too coarse for the shape: its thickest part is {2 * radius / grid.cell:.2f} cells across, "
+            f"needs at least {2 * MIN_INSCRIBED_CELLS:g} (raise grid.size)",
+        )
+
+
+# ---------------------------------------------------------------------------
+# Sensor and GPIS sections
+
+
+def _sensor(t: "_Table", cell: float, base_dir: Path) -> SensorModel:
+    noise = t.length("noise", cell, default=0.5 * cell, lo=0.0, lo_open=True)
+    band = t.length("surface_band", cell, default=1.5 * cell, lo=0.0, lo_open=True)
+    depth = t.length("interior_depth", cell, default=2.0 * cell, lo=0.0)
+    keep = t.number("interior_keep", 1.0, lo=0.0, hi=1.0)
+    regions = []
+    for r in t.tables("regions", min_count=0):
+        kind = r.string("kind", choices=REGION_KINDS)
+        has_shape, has_plane = "shape" in r.data, "half_plane" in r.data
+        if has_shape == has_plane:
+            raise r.error(None, "give exactly one of 'shape' or 'half_plane'")
+        if has_shape:
+            geom = _shape(r.table("shape"), cell, base_dir)
+        else:
+            hp = r.table("half_plane")
+            normal = np.asarray(hp.point("normal"))
+            if np.hypot(*normal) == 0.0:
+                raise hp.error("normal", "must not be the zero vector")
+            offset = hp.length("offset", cell, default=0.0, lo=-100.0, hi=100.0, lo_open=False)
+            hp.finish()
+            geom = _half_plane(normal / np.hypot(*normal), offset)
+        params: dict[str, float] = {}
+        if kind == "transparent":
+            params["value"] = r.length("value", cell, default=0.5 * cell, lo=-100.0, hi=100.0)
+            params["noise"] = r.length("noise", cell, default=math.sqrt(3.0) * cell, lo=0.0, lo_open=True)
+        elif kind == "specular":
+            params["noise"] = r.length("noise", cell, default=2.0 * cell, lo=0.0, lo_open=True)
+            params["drop_probability"] = r.number("drop_probability", 0.5, lo=0.0, hi=1.0)
+        r.finish()
+        regions.append(Region(kind=kind, geometry=geom, **params))
+    t.finish()
+    return SensorModel(noise, band, depth, keep, tuple(regions))
+
+
+def _half_plane(normal: np.ndarray, offset: float) -> Polygon:
+    """The points p with normal . p >= offset, as a polygon much larger than any grid."""
+    big = 1e3
+    tangent = np.array([-normal[1], normal[0]])
+    base = normal * offset
+    corners = [base + big * tangent, base + big * tangent + big * normal,
+               base - big * tangent + big * normal, base - big * tangent]
+    return Polygon(corners)
+
+
+def _gpis(t: "_Table", cell: float, truncation: float) -> GPISSettings:
+    lengthscale = t.length("lengthscale", cell, default=2.7 * cell, lo=0.0, lo_open=True)
+    settings = GPISSettings(
+        lengthscale=lengthscale,
+        scale=t.area("scale", cell, default=4.0 * cell**2),
+        prior_mean=t.length("prior_mean", cell, default=-1.0 * cell, lo=-100.0, hi=100.0),
+        hyperparameters=t.string("hyperparameters", "fixed", choices=("fixed", "ml")),
+        use_gradients=t.boolean("use_gradients", True),
+        active_set=t.boolean("active_set", True),
+        active_band=t.length("active_band", cell, default=max(truncation - 0.5 * cell, 0.5 * cell), lo=0.0),
+        active_spacing=t.length("active_spacing", cell, default=lengthscale, lo=0.0, lo_open=True),
+    )
+    t.finish()
+    return settings
+
+
+# ---------------------------------------------------------------------------
+# A typed reader over one TOML table
+
+
+_REQUIRED = object()
+_LENGTH_UNITS = {"m": 1.0, "cm": 1e-2, "mm": 1e-3}
+_QUANTITY = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([a-z]+)(\^2)?\s*$")
+
+
+class _Table:
+    """Reads typed fields from one table, tracking which keys were used."""
+
+    def __init__(self, data: Any, where: str, source: str):
+        self.data = data
+        self.where = where
+        self.source = source
+        self.used: set[str] = set()
+
+    def _path(self, key: str | None) -> str | None:
+        if key is None:
+            return self.where or None
+        return f"{self.where}.{key}" if self.where else key
+
+    def error(self, key: str | None, message: str) -> InputError:
+        return InputError(self.source, self._path(key), message)
+
+    def _get(self, key: str, default: Any) -> Any:
+        self.used.add(key)
+        if key in self.data:
+            return self.data[key]
+        if default is _REQUIRED:
+            raise self.error(key, "missing")
+        return default
+
+    def finish(self) -> None:
+        unknown = sorted(set(self.data) - self.used)
+        if unknown:
+            raise self.error(unknown[0], "unknown field")
+
+    def table(self, key: str, required: bool = True) -> "_Table":
+        value = self._get(key, _REQUIRED if required else {})
+        if not isinstance(value, dict):
+            raise self.error(key, f"expected a table, got {_type_name(value)}")
+        return _Table(value, self._path(key), self.source)
+
+    def tables(self, key: str, min_count: int) -> list["_Table"]:
+        value = self._get(key, _REQUIRED if min_count else [])
+        if not isinstance(value, list) or not all(isinstance(v, dict) for v in value):
+            raise self.error(key, f"expected a list of tables, got {_type_name(value)}")
+        if len(value) < min_count:
+            raise self.error(key, f"needs at least {min_count} entries")
+        return [_Table(v, f"{self._path(key)}[{k}]", self.source) for k, v in enumerate(value)]
+
+    def list(self, key: str, default: Any = _REQUIRED) -> list:
+        value = self._get(key, default)
+        if not isinstance(value, list):
+            raise self.error(key, f"expected a list, got {_type_name(value)}")
+        return value
+
+    def string(self, key: str, default: Any = _REQUIRED, choices: tuple[str, ...] | None = None) -> str:
+        value = self._get(key, default)
+        if not isinstance(value, str):
+            raise self.error(key, f"expected a string, got {_type_name(value)}")
+        if choices is not None and value not in choices:
+            raise self.error(key, f"'{value}' is not one of {', '.join(choices)}")
+        return value
+
+    def boolean(self, key: str, default: Any = _REQUIRED) -> bool:
+        value = self._get(key, default)
+        if not isinstance(value, bool):
+            raise self.error(key, f"expected true or false, got {_type_name(value)}")
+        return value
+
+    def integer(self, key: str, default: Any = _REQUIRED, lo: int | None = None, hi: int | None = None) -> int:
+        value = self._get(key, default)
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise self.error(key, f"expected an integer, got {_type_name(value)}")
+        if (lo is not None and value < lo) or (hi is not None and value > hi):
+            raise self.error(key, f"{value} is out of range [{lo}, {hi}]")
+        return value
+
+    def number(self, key: str, default: Any = _REQUIRED, lo: float | None = None, hi: float | None = None,
+               lo_open: bool = False) -> float:
+        value = self._get(key, default)
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise self.error(key, f"expected a number, got {_type_name(value)}")
+        return self._in_range(key, float(value), lo, hi, lo_open)
+
+    def _in_range(self, key: str, value: float, lo: float | None, hi: float | None, lo_open: bool,
+                  unit: str = "") -> float:
+        if not math.isfinite(value):
+            raise self.error(key, f"must be finite, got {value}")
+        below = lo is not None and (value <= lo if lo_open else value < lo)
+        above = hi is not None and value > hi
+        if below or above:
+            low = "-inf" if lo is None else f"{lo:g}"
+            high = "inf" if hi is None else f"{hi:g}"
+            bracket = "(" if lo_open else "["
+            raise self.error(key, f"{value:g}{unit} is out of range {bracket}{low}, {high}]")
+        return value
+
+    def _quantity(self, key: str, value: Any, cell: float, power: int) -> float:
+        """A number in SI units, or a string like '2 cells', '5 mm' (lengths) or
+        '4 cells^2', '25 mm^2' (areas)."""
+        if isinstance(value, bool) or not isinstance(value, (int, float, str)):
+            raise self.error(key, f"expected a number or a quantity like '2 cells', got {_type_name(value)}")
+        if not isinstance(value, str):
+            return float(value)
+        m = _QUANTITY.match(value)
+        squared = bool(m and m.group(3))
+        unit = m.group(2) if m else ""
+        per_unit = cell if unit in ("cell", "cells") else _LENGTH_UNITS.get(unit)
+        if m is None or per_unit is None or squared != (power == 2):
+            units = "cells, m, cm, mm" + ("; squared, e.g. '4 cells^2'" if power == 2 else "")
+            raise self.error(key, f"cannot read quantity '{value}' (units: {units})")
+        return float(m.group(1)) * per_unit**power
+
+    def length(self, key: str, cell: float, default: Any = _REQUIRED, lo: float | None = None,
+               hi: float | None = 100.0, lo_open: bool = True) -> float:
+        raw = self._get(key, default)
+        value = self._quantity(key, raw, cell, 1)
+        return self._in_range(key, value, lo, hi, lo_open and lo is not None and lo >= 0.0, " m")
+
+    def area(self, key: str, cell: float, default: Any = _REQUIRED) -> float:
+        raw = self._get(key, default)
+        value = self._quantity(key, raw, cell, 2)
+        return self._in_range(key, value, 0.0, 1e4, True, " m^2")
+
+    def point(self, key: str, default: Any = _REQUIRED) -> tuple[float, float]:
+        value = self._get(key, default)
+        return self.point_value(value, key)
+
+    def point_value(self, value: Any, key: str) -> tuple[float, float]:
+        if (not isinstance(value, (list, tuple)) or len(value) != 2
+                or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)):
+            raise self.error(key, f"expected a point [x, y] of two numbers, got {_short(value)}")
+        if not all(math.isfinite(v) for v in value):
+            raise self.error(key, "coordinates must be finite")
+        if max(abs(v) for v in value) > 100.0:
+            raise self.error(key, "coordinates must be within 100 m of the origin")
+        return float(value[0]), float(value[1])
+
+    def points(self, key: str) -> list[tuple[float, float]]:
+        return self.points_value(self._get(key, _REQUIRED), key)
+
+    def points_value(self, value: Any, key: str) -> list[tuple[float, float]]:
+        if not isinstance(value, list):
+            raise self.error(key, f"expected a list of points [[x, y], ...], got {_type_name(value)}")
+        pts = [self.point_value(v, f"{key}[{k}]") for k, v in enumerate(value)]
+        if len(pts) < 3:
+            raise self.error(key, f"a polygon needs at least 3 points, got {len(pts)}")
+        return pts
+
+
+def _type_name(value: Any) -> str:
+    names = {bool: "a boolean", int: "an integer", float: "a number", str: "a string",
+             list: "a list", dict: "a table"}
+    return names.get(type(value), type(value).__name__)
+
+
+def _short(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 40 else text[:37] + "..."
