@@ -14,8 +14,9 @@ from scipy import optimize
 SAMPLING_METHODS = ("fast", "exact", "pathwise", "weight-space")
 #: Rows of a kernel block built at once; bounds the temporaries to a few hundred MB.
 _CHUNK = 2048
-#: Relative eigenvalue cut-off of the separable prior basis (covariance error ~ this).
-_BASIS_TOL = 1e-12
+#: Relative eigenvalue cut-off of the separable prior basis: the kernel is reproduced to
+#: ~1e-9 of the prior variance (tested).
+_BASIS_TOL = 1e-10
 #: Diagonal jitter of the training covariance, relative to each prior variance; keeps the
 #: factorisation stable for near-duplicate inputs with tiny noise.
 _JITTER = 1e-10
@@ -209,10 +210,13 @@ class GPIS:
         fy, _ = by.at(P[:, 1])
         if method == "pathwise":
             raise ValueError("method 'pathwise' needs a grid; use sample_grid or 'weight-space'")
-        for s, coef in self._weight_space_draws(bx, by, n, rng):
+        mean_coef = self._weight_space(bx, by)[0]
+        out[:] = self.prior_mean_ + np.einsum("pb,ba,pa->p", fy, mean_coef, fx)
+        fx32, fy32 = fx.astype(np.float32), fy.astype(np.float32)
+        for s, dev in self._weight_space_draws(bx, by, n, rng):
             # value(p) = fy(p) . coef . fx(p), over blocks of points to bound the temporaries
-            for p in _chunks(len(P), max(64, 2**21 // (len(coef) * bx.rank))):
-                out[s, p] = self.prior_mean_ + np.einsum("npa,pa->np", np.matmul(fy[p], coef), fx[p])
+            for p in _chunks(len(P), max(64, 2**21 // (len(dev) * bx.rank))):
+                out[s, p] += np.einsum("npa,pa->np", np.matmul(fy32[p], dev), fx32[p])
         return out
 
     def sample_grid(self, xs, ys, n: int, rng: np.random.Generator, method: str = "fast"):
@@ -225,7 +229,7 @@ class GPIS:
         The fast samplers use that the SE kernel separates, k = scale kx(x, x') ky(y, y'):
         the prior over values and gradients is exactly f = m + sqrt(scale) Psi Z Phi^T
         with 1-D bases Phi, Psi (an eigenbasis of the 1-D kernel and its derivative at
-        the grid's coordinates, cut at 1e-12 relative, r ~ 3 x extent / lengthscale
+        the grid's coordinates, cut at 1e-10 relative, r ~ 3 x extent / lengthscale
         functions) and Z an r_y x r_x standard normal matrix. Conditioning is exact in
         that basis, in one of two ways:
 
@@ -266,15 +270,26 @@ class GPIS:
         if method == "pathwise":
             if on_grid is None:
                 raise ValueError("method 'pathwise' needs every observation on the grid")
+            mean_coef = np.zeros((by.rank, bx.rank))
             draws = self._pathwise_on_grid(fx, dfx, fy, dfy, on_grid, n, rng)
         else:
+            mean_coef = self._weight_space(bx, by)[0]
             draws = self._weight_space_draws(bx, by, n, rng)
-        for s, coef in draws:
-            left = np.matmul(fy, coef)  # (k, ny, rx)
-            np.matmul(left, fx.T, out=values[s])
-            np.matmul(left, dfx.T, out=planes[s, 0])
-            np.matmul(np.matmul(dfy, coef), fx.T, out=planes[s, 1])
-        values += self.prior_mean_
+        # Mean fields once in double precision; each draw adds its deviation fields,
+        # computed in the precision the strategy delivers them in.
+        left = fy @ mean_coef
+        values[:] = self.prior_mean_ + left @ fx.T
+        planes[:, 0] = left @ dfx.T
+        planes[:, 1] = dfy @ mean_coef @ fx.T
+        cast: dict = {}
+        for s, dev in draws:
+            if dev.dtype.name not in cast:
+                cast[dev.dtype.name] = [a.astype(dev.dtype) for a in (fx, dfx, fy, dfy)]
+            gx, gdx, gy, gdy = cast[dev.dtype.name]
+            left = np.matmul(gy, dev)  # (k, ny, rx)
+            values[s] += np.matmul(left, gx.T)
+            planes[s, 0] += np.matmul(left, gdx.T)
+            planes[s, 1] += np.matmul(np.matmul(gdy, dev), gx.T)
         return values, np.moveaxis(planes, 1, -1)
 
     def _grid_index(self, xs: np.ndarray, ys: np.ndarray):
@@ -351,44 +366,81 @@ class GPIS:
 
     def fast_strategy(self, nx: int, ny: int, rx: int, ry: int, on_grid: bool, n: int) -> str:
         """The cheaper exact sampler for n draws on an nx x ny grid: 'pathwise' or
-        'weight-space', by counted multiply-adds. Weight-space pays a one-off D r^4 + r^6/3
-        and r^4/4 per draw (single-precision solve); pathwise pays D^2 + O(M^2 r) per
-        draw, with a factor 2 for its gathers and scatters (measured)."""
+        'weight-space', from counted multiply-adds with rates measured on this project's
+        reference machine: weight-space pays a one-off M r^4 + r^6 / 3 (large GEMMs,
+        about 3x the rate of the per-draw work) and r^4 / 4 per draw; pathwise pays
+        D^2 + 6 M^2 r + 4 M r^2 per draw at about 0.8x that rate, plus ~30 us overhead."""
         d, r2 = len(self.targets_), rx * ry
-        weight_space = n * r2 * r2 / 4 + d * r2 * r2 + r2**3 / 3
-        pathwise = 2 * n * (d * d + 3 * nx * ny * (rx + ry) + 4 * max(nx, ny) * r2)
+        weight_space = n * r2 * r2 / 4 + (max(nx, ny) * r2 * r2 + r2**3 / 3) / 3
+        pathwise = n * (1.2 * (d * d + 3 * nx * ny * (rx + ry) + 4 * max(nx, ny) * r2) + 3e5)
         return "pathwise" if on_grid and pathwise < weight_space else "weight-space"
 
-    def _weight_space_draws(self, bx: "_Basis1D", by: "_Basis1D", n: int, rng: np.random.Generator,
-                            chunk: int = 128):
-        """Yield (slice, coef) with coef (k, r_y, r_x) drawn from the exact posterior of
-        the separable coefficients: f - prior_mean = Psi coef Phi^T.
-
-        The random part R^-T z is computed in single precision (twice as fast); its
-        relative error, about 1e-7 times the condition number of R, stays below 1e-4 of
-        the posterior standard deviation (tested). The mean stays in double precision.
-        """
+    def _weight_space(self, bx: "_Basis1D", by: "_Basis1D") -> tuple[np.ndarray, np.ndarray]:
+        """Posterior of the separable coefficients: the mean coef (r_y, r_x) and the
+        single-precision Cholesky factor R of the precision I + scale F^T Sigma^-1 F of
+        vec(coef) / sqrt(scale); cached per pair of bases."""
         key = ("weight-space", id(bx), id(by))
         if key not in self._bases:
             F = self._observation_features(bx, by)
             noise = self.noise_ + _JITTER * self._prior_diag()
-            Fw = F * (math.sqrt(self.scale_) / np.sqrt(noise))[:, None]
-            precision = Fw.T @ Fw
+            sc = math.sqrt(self.scale_)
+            precision = self._data_precision(bx, by, self.scale_ / noise)
+            if precision is None:
+                Fw = F * (sc / np.sqrt(noise))[:, None]
+                precision = sla.blas.dsyrk(1.0, Fw, trans=1, lower=1)  # lower triangle of Fw^T Fw
             precision[np.diag_indices_from(precision)] += 1.0
             R = sla.cholesky(precision, lower=True, check_finite=False)
-            rhs = Fw.T @ (self._residual(self.prior_mean_) / np.sqrt(noise))
+            rhs = F.T @ (self._residual(self.prior_mean_) * sc / noise)
             mean = sla.cho_solve((R, True), rhs, check_finite=False)
-            self._bases[key] = (mean, R.astype(np.float32))
-        mean, R32 = self._bases[key]
-        sc = math.sqrt(self.scale_)
+            self._bases[key] = (sc * mean.reshape(by.rank, bx.rank), R.astype(np.float32))
+        return self._bases[key]
+
+    def _data_precision(self, bx: "_Basis1D", by: "_Basis1D", weights: np.ndarray) -> np.ndarray | None:
+        """F^T diag(weights) F by Kronecker accumulation when every observation sits on
+        the bases' nodes (None otherwise).
+
+        A value reading at node (j, i) contributes w (psi_j psi_j^T) kron (phi_i phi_i^T),
+        gradient readings the same with phi' or psi'. Summing first over each row of a
+        weight image costs O(M^2 r^2 + M r^4) instead of O(D r^4)."""
+        ix, iy = bx.node_index(self.X_[:, 0]), by.node_index(self.X_[:, 1])
+        if ix is None or iy is None:
+            return None
+        g = self.gradient_mask_
+        nv, ng = self.n_values_, int(g.sum())
+        phi, dphi = bx.node_features()
+        psi, dpsi = by.node_features()
+        terms = [(psi, phi, iy, ix, weights[:nv]),
+                 (psi, dphi, iy[g], ix[g], weights[nv:nv + ng]),
+                 (dpsi, phi, iy[g], ix[g], weights[nv + ng:])]
+        ry, rx = psi.shape[1], phi.shape[1]
+        out = np.zeros((ry, ry, rx, rx))
+        for ys, xs, rows, cols, w in terms:
+            image = np.zeros((len(ys), len(xs)))
+            np.add.at(image, (rows, cols), w)
+            used = np.flatnonzero(image.any(axis=1))
+            per_row = image[used] @ (xs[:, :, None] * xs[:, None, :]).reshape(len(xs), -1)  # sum_i w_ji x_i x_i^T
+            yy = (ys[used, :, None] * ys[used, None, :]).reshape(len(used), -1)
+            out += (yy.T @ per_row).reshape(ry, ry, rx, rx)
+        return out.transpose(0, 2, 1, 3).reshape(ry * rx, ry * rx)
+
+    def _weight_space_draws(self, bx: "_Basis1D", by: "_Basis1D", n: int, rng: np.random.Generator,
+                            chunk: int = 128):
+        """Yield (slice, dev) with dev (k, r_y, r_x) float32: draws of the separable
+        coefficients minus their posterior mean, f = mean fields + Psi dev Phi^T.
+
+        The deviations R^-T z are computed in single precision (about twice as fast);
+        their relative error, about 1e-7 times the condition number of R, stays below
+        1e-4 of the posterior standard deviation (tested). The mean is double precision.
+        """
+        R32 = self._weight_space(bx, by)[1]
+        sc = np.float32(math.sqrt(self.scale_))
         for start in range(0, n, chunk):
             k = min(chunk, n - start)
+            # Sample-major z, so that the stream does not depend on the chunk size.
             z = rng.standard_normal((k, R32.shape[0]), dtype=np.float32)
-            # Precision = R R^T, so R^-T z has covariance precision^-1; z is drawn
-            # sample-major so that the stream does not depend on the chunk size.
+            # Precision = R R^T, so R^-T z has covariance precision^-1.
             dev = sla.solve_triangular(R32, z.T, lower=True, trans="T", check_finite=False)
-            coef = mean + dev.T
-            yield slice(start, start + k), sc * coef.reshape(k, by.rank, bx.rank)
+            yield slice(start, start + k), sc * dev.T.reshape(k, by.rank, bx.rank)
 
     def _prior_diag(self) -> np.ndarray:
         """Prior variances of the training vector: scale for values, scale/l^2 for gradients."""
@@ -442,6 +494,16 @@ class _Basis1D:
         self._lam = lam[keep]
         self._proj = vec[:, keep] / np.sqrt(lam[keep])
         self._node_features = vec[:, keep] * np.sqrt(lam[keep])
+
+    def node_features(self) -> tuple[np.ndarray, np.ndarray]:
+        """Features (U, r) and their derivatives in metres (U, r) at the nodes."""
+        u = len(self.nodes)
+        return self._node_features[:u], self._node_features[u:] / self.lengthscale
+
+    def node_index(self, coords: np.ndarray) -> np.ndarray | None:
+        """Index of each coordinate among the nodes, or None if one is not a node."""
+        idx = np.clip(np.searchsorted(self.nodes, np.round(coords, 12)), 0, len(self.nodes) - 1)
+        return idx if np.allclose(self.nodes[idx], coords, rtol=0.0, atol=1e-12) else None
 
     def at(self, coords: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Features (P, r) and their derivatives in metres (P, r) at coordinates (P,)."""
