@@ -7,6 +7,7 @@ naming the file, the field and what is wrong. ``docs/scenes.md`` documents the f
 from __future__ import annotations
 
 import csv
+import json
 import math
 import os
 import re
@@ -87,12 +88,6 @@ class Scene:
         """Exact signed distance of the true shape at the cell centres, truncated, (M, M)."""
         return grid_sdf(self.shape, self.grid, self.truncation)
 
-    def with_grid_size(self, size: int) -> "Scene":
-        """The same physical scene on a finer or coarser grid; lengths given in cells
-        in the file are NOT rescaled (they were converted to metres at load)."""
-        from dataclasses import replace
-
-        return replace(self, grid=Grid(size, self.grid.extent))
 
 
 # ---------------------------------------------------------------------------
@@ -120,8 +115,12 @@ def resolve(name_or_path: str) -> Path:
     return path
 
 
-def load_scene(name_or_path: str | Path) -> Scene:
-    """Load and validate a scene by library name or path."""
+def load_scene(name_or_path: str | Path, overrides: dict | None = None) -> Scene:
+    """Load and validate a scene by library name or path.
+
+    ``overrides`` (nested tables, e.g. ``{"grid": {"size": 100}}``) replace the file's
+    values before validation, so quantities given in cells follow the new grid.
+    """
     path = resolve(str(name_or_path))
     source = str(path)
     try:
@@ -131,9 +130,19 @@ def load_scene(name_or_path: str | Path) -> Scene:
         raise InputError(source, None, "not a text file (invalid UTF-8)") from None
     except tomllib.TOMLDecodeError as exc:
         raise InputError(source, None, f"invalid TOML: {exc}") from None
+    except RecursionError:  # tomllib recurses once per level of nested arrays and inline tables
+        raise InputError(source, None, "invalid TOML: arrays or inline tables nested too deeply") from None
     except OSError as exc:
         raise InputError(source, None, f"cannot read: {exc.strerror or exc}") from None
-    return parse_scene(data, source=source, base_dir=path.parent, default_name=path.stem)
+    return parse_scene(_merged(data, overrides or {}), source=source, base_dir=path.parent, default_name=path.stem)
+
+
+def _merged(data: dict, overrides: dict) -> dict:
+    out = dict(data)
+    for key, value in overrides.items():
+        both_tables = isinstance(value, dict) and isinstance(out.get(key), dict)
+        out[key] = _merged(out[key], value) if both_tables else value
+    return out
 
 
 def parse_scene(data: dict, source: str, base_dir: Path, default_name: str = "scene") -> Scene:
@@ -241,12 +250,15 @@ def _outline(t: "_Table", cell: float, base_dir: Path) -> Polygon:
     scale = t.number("scale", lo=0.0, lo_open=True, hi=100.0)
     centring = t.string("center", "centroid", choices=("centroid", "bbox", "none"))
     flip_y = t.boolean("flip_y", False)
+    if "\0" in rel:
+        raise t.error("path", "must not contain a NUL character")
     path = (base_dir / rel).resolve()
     try:
-        with open(path, newline="", encoding="utf-8") as fh:
+        # utf-8-sig: spreadsheet programs often start a CSV with a byte-order mark
+        with open(path, newline="", encoding="utf-8-sig") as fh:
             rows = list(csv.reader(fh))
-    except (OSError, UnicodeDecodeError) as exc:
-        detail = exc.strerror if isinstance(exc, OSError) and exc.strerror else type(exc).__name__
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        detail = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
         raise t.error("path", f"cannot read outline {path}: {detail}") from None
     if not rows or [c.strip().lower() for c in rows[0]] != ["x", "y"]:
         raise t.error("path", f"outline {path}: first line must be the header 'x,y'")
@@ -265,7 +277,10 @@ def _outline(t: "_Table", cell: float, base_dir: Path) -> Polygon:
         vertices.append((x, -y if flip_y else y))
     if len(vertices) < 3:
         raise t.error("path", f"outline {path}: needs at least 3 vertices, has {len(vertices)}")
-    geom = _valid_polygon(t, Polygon(np.asarray(vertices) * scale), "path")
+    vertices = np.asarray(vertices) * scale
+    if np.abs(vertices).max() > 100.0:
+        raise t.error("path", f"outline {path}: coordinates times scale must be within 100 m of the origin")
+    geom = _valid_polygon(t, Polygon(vertices), "path")
     if centring == "centroid":
         c = geom.centroid
         geom = shapely.affinity.translate(geom, -c.x, -c.y)
@@ -276,21 +291,28 @@ def _outline(t: "_Table", cell: float, base_dir: Path) -> Polygon:
 
 
 def _random_shape(t: "_Table", cell: float) -> Polygon:
-    """The largest region below zero of |x|^2/R^2 - 1 + amplitude * xi(x), where xi is a
-    smooth unit-variance Gaussian random field of correlation length ``lengthscale``.
+    """The largest region below zero of |x|^2/R^2 - 1 + amplitude * xi(x), where xi is
+    white noise smoothed by a Gaussian of standard deviation ``lengthscale`` (so its
+    correlation is exp(-d^2 / (4 lengthscale^2))), shifted and scaled to mean 0, std 1.
 
-    The field lives on a fixed 256 x 256 lattice over [-2R, 2R]^2, so the shape depends
-    only on its own parameters, never on the scene's grid.
+    The field lives on a 256 x 256 lattice over [-H, H]^2 with H = 2R for amplitudes up
+    to 0.5, widened with the amplitude (H = 2R sqrt((1 + 4 amplitude) / 3)) so that even
+    a four-sigma excursion of xi stays inside it; the shape depends only on its own
+    parameters, never on the scene's grid.
     """
     seed = t.integer("seed", lo=0, hi=2**63 - 1)
     radius = t.length("radius", cell, lo=0.0)
-    lengthscale = t.length("lengthscale", cell, default=0.5 * radius, lo=0.0)
+    # The lattice is periodic and 4R wide: beyond 2R its lowest modes, not the lengthscale,
+    # set the correlation, while the filter's cost keeps growing with the lengthscale.
+    lengthscale = t.length("lengthscale", cell, default=0.5 * radius, lo=0.0, hi=2.0 * radius)
     amplitude = t.number("amplitude", 0.5, lo=0.0, hi=5.0)
     n = 256
-    lattice = Grid(n, 4 * radius)
+    lattice = Grid(n, 4 * radius * max(1.0, math.sqrt((1 + 4 * amplitude) / 3)))
     rng = np.random.default_rng(seed)
     xi = ndimage.gaussian_filter(rng.standard_normal((n, n)), lengthscale / lattice.cell, mode="wrap")
-    xi /= xi.std()
+    # Smoothing keeps the noise's sample mean while it shrinks every other mode; left in,
+    # that constant would scale the whole shape by a seed-dependent factor.
+    xi = (xi - xi.mean()) / xi.std()
     r2 = (lattice.points**2).sum(axis=1).reshape(n, n) / radius**2
     region = largest_region(inside_region(r2 - 1.0 + amplitude * xi, lattice))
     if region.is_empty:
@@ -313,7 +335,9 @@ def _check_shape_on_grid(shape: BaseGeometry, grid: Grid, source: str) -> None:
             f"{limit:.4g} m (half the extent less {BORDER_CELLS:g} cells)",
         )
     radius = shapely.maximum_inscribed_circle(shape, grid.cell / 20).length
-    if radius < MIN_INSCRIBED_CELLS * grid.cell:
+    # The relative slack forgives rounding in rotated coordinates: a part exactly two
+    # cells thick passes whatever its orientation.
+    if radius < MIN_INSCRIBED_CELLS * grid.cell * (1 - 1e-9):
         raise InputError(
             source, "grid.size",
             f"grid too coarse for the shape: its thickest part is {2 * radius / grid.cell:.2f} cells across, "
@@ -378,7 +402,8 @@ def _gpis(t: "_Table", cell: float, truncation: float) -> GPISSettings:
         hyperparameters=t.string("hyperparameters", "fixed", choices=("fixed", "ml")),
         use_gradients=t.boolean("use_gradients", True),
         active_set=t.boolean("active_set", True),
-        active_band=t.length("active_band", cell, default=max(truncation - 0.5 * cell, 0.5 * cell), lo=0.0),
+        active_band=t.length("active_band", cell, default=max(min(2.5 * cell, truncation - 0.5 * cell), 0.5 * cell),
+                             lo=0.0),
         active_spacing=t.length("active_spacing", cell, default=lengthscale, lo=0.0, lo_open=True),
     )
     t.finish()
@@ -391,6 +416,7 @@ def _gpis(t: "_Table", cell: float, truncation: float) -> GPISSettings:
 
 _REQUIRED = object()
 _LENGTH_UNITS = {"m": 1.0, "cm": 1e-2, "mm": 1e-3}
+_BARE_KEY = re.compile(r"[A-Za-z0-9_-]+")
 _QUANTITY = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([a-z]+)(\^2)?\s*$")
 
 
@@ -422,7 +448,7 @@ class _Table:
     def finish(self) -> None:
         unknown = sorted(set(self.data) - self.used)
         if unknown:
-            raise self.error(unknown[0], "unknown field")
+            raise self.error(_key_name(unknown[0]), "unknown field")
 
     def table(self, key: str, required: bool = True) -> "_Table":
         value = self._get(key, _REQUIRED if required else {})
@@ -471,7 +497,7 @@ class _Table:
         value = self._get(key, default)
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise self.error(key, f"expected a number, got {_type_name(value)}")
-        return self._in_range(key, float(value), lo, hi, lo_open)
+        return self._in_range(key, _to_float(value), lo, hi, lo_open)
 
     def _in_range(self, key: str, value: float, lo: float | None, hi: float | None, lo_open: bool,
                   unit: str = "") -> float:
@@ -492,7 +518,7 @@ class _Table:
         if isinstance(value, bool) or not isinstance(value, (int, float, str)):
             raise self.error(key, f"expected a number or a quantity like '2 cells', got {_type_name(value)}")
         if not isinstance(value, str):
-            return float(value)
+            return _to_float(value)
         m = _QUANTITY.match(value)
         squared = bool(m and m.group(3))
         unit = m.group(2) if m else ""
@@ -521,11 +547,12 @@ class _Table:
         if (not isinstance(value, (list, tuple)) or len(value) != 2
                 or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)):
             raise self.error(key, f"expected a point [x, y] of two numbers, got {_short(value)}")
-        if not all(math.isfinite(v) for v in value):
+        x, y = _to_float(value[0]), _to_float(value[1])
+        if not (math.isfinite(x) and math.isfinite(y)):
             raise self.error(key, "coordinates must be finite")
-        if max(abs(v) for v in value) > 100.0:
+        if max(abs(x), abs(y)) > 100.0:
             raise self.error(key, "coordinates must be within 100 m of the origin")
-        return float(value[0]), float(value[1])
+        return x, y
 
     def points(self, key: str) -> list[tuple[float, float]]:
         return self.points_value(self._get(key, _REQUIRED), key)
@@ -537,6 +564,21 @@ class _Table:
         if len(pts) < 3:
             raise self.error(key, f"a polygon needs at least 3 points, got {len(pts)}")
         return pts
+
+
+def _key_name(key: str) -> str:
+    """A key as TOML writes it: bare when it can be, else quoted with escapes, so that
+    an error naming it stays on one line."""
+    return key if _BARE_KEY.fullmatch(key) else json.dumps(key)
+
+
+def _to_float(value: int | float) -> float:
+    """float(value); TOML integers are unbounded, and those too large for a float
+    become +/-inf (then rejected as not finite) instead of raising OverflowError."""
+    try:
+        return float(value)
+    except OverflowError:
+        return math.inf if value > 0 else -math.inf
 
 
 def _type_name(value: Any) -> str:
