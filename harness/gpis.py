@@ -29,18 +29,25 @@ def select_active_set(points: np.ndarray, values: np.ndarray, noise_var: np.ndar
     """Indices of the observations the GP is fitted on.
 
     All readings with |value| <= band (the surface, where the zero level is decided) are
-    kept; elsewhere the field is far from zero and smooth at the lengthscale, so one
-    reading (the least noisy) per square of side ``spacing`` is kept. With a band a
-    fixed number of cells wide, the count grows like the perimeter in cells, not like
-    the area.
+    kept; elsewhere the field is far from zero and smooth at the lengthscale, so the
+    plane is cut into equal squares of side at most ``spacing`` spanning the readings,
+    and in each square the reading nearest its centre is kept (the least noisy on a
+    tie), which leaves a regular lattice. With a band a fixed number of cells wide the
+    count grows like the perimeter in cells, not like the area.
     """
     values = np.asarray(values, dtype=float)
+    points = np.asarray(points, dtype=float)
     near = np.abs(values) <= band
     far = np.flatnonzero(~near)
     if far.size:
-        bins = np.floor(np.asarray(points)[far] / spacing).astype(np.int64)
-        key = (bins[:, 0] - bins[:, 0].min()) * (bins[:, 1].max() - bins[:, 1].min() + 1) + (bins[:, 1] - bins[:, 1].min())
-        order = np.lexsort((np.asarray(noise_var)[far], key))
+        p = points[far]
+        lo, hi = p.min(axis=0), p.max(axis=0)
+        counts = np.maximum(np.ceil((hi - lo) / spacing - 1e-9), 1).astype(np.int64)
+        side = np.where(hi > lo, (hi - lo) / counts, 1.0)
+        bins = np.minimum(((p - lo) / side).astype(np.int64), counts - 1)
+        key = bins[:, 0] * counts[1] + bins[:, 1]
+        offset = np.linalg.norm(p - (lo + (bins + 0.5) * side), axis=1)
+        order = np.lexsort((np.asarray(noise_var)[far], np.round(offset / spacing, 9), key))
         first = np.ones(order.size, dtype=bool)
         first[1:] = key[order][1:] != key[order][:-1]
         far = far[order[first]]

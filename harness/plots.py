@@ -52,26 +52,26 @@ def scene_figure(belief: Belief, rng: np.random.Generator, n_blur: int = 100, ti
     fig, axes = plt.subplots(1, 3, figsize=(15.5, 5.4), constrained_layout=True)
 
     ax = axes[0]
+    std_mm = np.full((grid.size, grid.size), np.nan)
+    std_mm[obs.cells[:, 1], obs.cells[:, 0]] = np.sqrt(obs.noise_var) * 1e3
+    lo = np.nanmin(std_mm)
+    im = ax.imshow(std_mm, origin="lower", extent=extent_mm, cmap="viridis", interpolation="nearest",
+                   norm=LogNorm(vmin=lo, vmax=max(np.nanmax(std_mm), 10 * lo)))
+    fig.colorbar(im, ax=ax, shrink=0.8, label="reading noise std (mm); blank: not observed")
     frame = box(-grid.extent / 2, -grid.extent / 2, grid.extent / 2, grid.extent / 2)
-    handles = []
+    handles = {}
     for region in scene.sensor.regions:
         colour, hatch = REGION_STYLE[region.kind]
         for poly in polygons(region.geometry.intersection(frame)):
             xy = np.asarray(poly.exterior.coords) * 1e3
-            ax.fill(xy[:, 0], xy[:, 1], facecolor="none", edgecolor=colour, hatch=hatch, lw=0.8, zorder=1)
-        handles.append(Patch(facecolor="none", edgecolor=colour, hatch=hatch, label=region.kind))
-    std_mm = np.sqrt(obs.noise_var) * 1e3
-    size = (72 * 5.0 / grid.size) ** 2 * 0.55  # marker area ~ one cell at this figure size
-    sc = ax.scatter(obs.points[:, 0] * 1e3, obs.points[:, 1] * 1e3, c=std_mm, s=size, marker="s",
-                    cmap="viridis", norm=LogNorm(vmin=std_mm.min(), vmax=max(std_mm.max(), 10 * std_mm.min())),
-                    linewidths=0, zorder=2)
-    _outline(ax, scene.shape, color="crimson", lw=1.4, zorder=3)
-    fig.colorbar(sc, ax=ax, shrink=0.8, label="reading noise std (mm)")
+            ax.fill(xy[:, 0], xy[:, 1], facecolor="none", edgecolor=colour, hatch=hatch, lw=1.0, zorder=3)
+        handles[region.kind] = Patch(facecolor="none", edgecolor=colour, hatch=hatch, label=f"{region.kind} region")
+    _outline(ax, scene.shape, color="crimson", lw=1.4, zorder=4)
     counts = np.bincount(obs.kind, minlength=len(KIND_NAMES))
     seen = ", ".join(f"{counts[k]} {KIND_NAMES[k]}" for k in range(len(KIND_NAMES)) if counts[k])
     ax.set_title(f"Observations ({len(obs)} of {grid.size**2} cells)\n{seen}", fontsize=10)
-    handles.append(plt.Line2D([], [], color="crimson", lw=1.4, label="true shape"))
-    ax.legend(handles=handles, loc="lower left", fontsize=8, framealpha=0.85)
+    legend = [*handles.values(), plt.Line2D([], [], color="crimson", lw=1.4, label="true shape")]
+    ax.legend(handles=legend, loc="lower left", fontsize=8, framealpha=0.85)
 
     ax = axes[1]
     prob, fine = inside_probability(belief, n_blur, rng)

@@ -372,6 +372,7 @@ def _sensor(t: "_Table", cell: float, base_dir: Path) -> SensorModel:
             geom = _half_plane(normal / np.hypot(*normal), offset)
         params: dict[str, float] = {}
         if kind == "transparent":
+            params["depth"] = r.length("depth", cell, default=band, lo=0.0, lo_open=True)
             params["value"] = r.length("value", cell, default=0.5 * cell, lo=-100.0, hi=100.0)
             params["noise"] = r.length("noise", cell, default=math.sqrt(3.0) * cell, lo=0.0, lo_open=True)
         elif kind == "specular":

@@ -23,8 +23,10 @@ class Region:
     """A part of the scene where the sensor misbehaves in one way.
 
     occluded: cells inside are not observed at all.
-    transparent: surface and interior cells read ``value`` (an "outside" reading)
-        with noise std ``noise``.
+    transparent: cells with -depth < sdf < surface_band read ``value`` (an "outside"
+        reading) with noise std ``noise``. With the default depth = surface_band only
+        the surface is misread, as in the original; a larger depth makes the part
+        see-through to that depth.
     specular: surface cells are dropped with ``drop_probability``; the kept ones get
         noise variance base^2 + U(0,1) * noise^2.
     """
@@ -33,6 +35,7 @@ class Region:
     geometry: BaseGeometry
     noise: float = 0.0
     value: float = 0.0
+    depth: float = 0.0
     drop_probability: float = 0.0
 
 
@@ -102,14 +105,16 @@ def observe(sensor: SensorModel, grid: Grid, truth: np.ndarray, rng: np.random.G
     observed &= ~deep | (u_keep < sensor.interior_keep)
 
     surface = np.abs(f) < sensor.surface_band
-    # Later regions of the same kind add to earlier ones; occlusion beats everything.
+    # Regions apply kind by kind, so occlusion beats transparency beats specularity.
+    # Where regions of one kind overlap, the later one's parameters replace the
+    # earlier one's, and (one uniform per cell) drops act as the larger probability.
     for kind_name in ("specular", "transparent", "occluded"):
         for region in (r for r in sensor.regions if r.kind == kind_name):
             inside = shapely.contains_xy(region.geometry, x, y)
             if kind_name == "occluded":
                 observed &= ~inside
             elif kind_name == "transparent":
-                hit = inside & (f < sensor.surface_band)
+                hit = inside & (f < sensor.surface_band) & (f > -region.depth)
                 mean[hit] = region.value
                 var[hit] = region.noise**2
                 kind[hit] = TRANSPARENT

@@ -183,7 +183,7 @@ def test_separable_basis_reproduces_the_1d_kernel_and_its_derivatives():
     assert n > basis.rank > 10
 
 
-def test_active_set_keeps_the_band_and_one_reading_per_far_square():
+def test_active_set_keeps_the_band_and_a_regular_far_lattice():
     rng = np.random.default_rng(0)
     xs = (np.arange(40) + 0.5) * 0.005 - 0.1
     P = np.array([(x, y) for y in xs for x in xs])
@@ -194,14 +194,20 @@ def test_active_set_keeps_the_band_and_one_reading_per_far_square():
     near = np.flatnonzero(np.abs(values) <= 0.0125)
     assert set(near) <= set(idx)
     far = np.setdiff1d(idx, near)
-    bins = np.floor(P[far] / 0.0135).astype(int)
-    assert len({tuple(b) for b in bins}) == len(far)  # one per square
-    # ... and the least noisy one of its square
+    # The 0.195 m span is cut into 15 equal squares of 13 mm per axis; where a square
+    # holds far readings exactly one is kept, the one nearest its centre.
+    side = 0.195 / 15
     all_far = np.setdiff1d(np.arange(len(P)), near)
-    all_bins = np.floor(P[all_far] / 0.0135).astype(int)
-    for k, b in zip(far, bins):
-        same = all_far[(all_bins == b).all(1)]
-        assert noise[k] == noise[same].min()
+    bins = np.minimum(((P[all_far] - P[all_far].min(0)) / side).astype(int), 14)
+    occupied = {tuple(b) for b in bins}
+    kept = {tuple(b) for b in bins[np.isin(all_far, far)]}
+    assert kept == occupied and len(far) == len(occupied)
+    for k in far:
+        b = bins[all_far == k][0]
+        same = all_far[(bins == b).all(1)]
+        centre = P[all_far].min(0) + (b + 0.5) * side
+        dist = np.linalg.norm(P[same] - centre, axis=1)
+        assert np.linalg.norm(P[k] - centre) <= dist.min() + 1e-12
 
 
 # -- samplers ------------------------------------------------------------------------

@@ -549,23 +549,27 @@ def test_interior_cells_are_kept_with_the_interior_keep_probability(load):
 
 
 def test_transparent_cells_read_the_given_value_on_average(load):
-    scene = load(BIG_DISK + """
+    region = """
         [[sensor.regions]]
         kind = "transparent"
         value = "0.5 cells"
         noise = "2 cells"
         half_plane = { normal = [1, 0] }
-    """, grid=BIG_DISK_GRID)
+    """
     h = 0.2 / 80
-    obs = read(scene, 5)
-    hit = obs.kind == TRANSPARENT
-    f = scene.true_sdf.ravel()[obs.cells[:, 0] + 80 * obs.cells[:, 1]]
-    # Transparent: inside the region and below the surface band (surface and interior cells).
-    np.testing.assert_array_equal(hit, (obs.points[:, 0] > 0) & (f < scene.sensor.surface_band))
-    n = int(hit.sum())
-    assert n > 1000
-    assert abs(obs.values[hit].mean() - 0.5 * h) <= 4 * 2 * h / math.sqrt(n)
-    np.testing.assert_allclose(obs.noise_var[hit], (2 * h) ** 2, rtol=1e-12)
+    for depth, minimum in ((None, 150), ("10 cm", 1000)):
+        scene = load(BIG_DISK + region + (f'depth = "{depth}"\n' if depth else ""), grid=BIG_DISK_GRID)
+        obs = read(scene, 5)
+        hit = obs.kind == TRANSPARENT
+        f = scene.true_sdf.ravel()[obs.cells[:, 0] + 80 * obs.cells[:, 1]]
+        # Misread: inside the region, below the surface band and above -depth (by
+        # default depth = surface band, so only the surface, as in the original).
+        floor = -scene.sensor.surface_band if depth is None else -0.1
+        np.testing.assert_array_equal(hit, (obs.points[:, 0] > 0) & (f < scene.sensor.surface_band) & (f > floor))
+        n = int(hit.sum())
+        assert n > minimum
+        assert abs(obs.values[hit].mean() - 0.5 * h) <= 4 * 2 * h / math.sqrt(n)
+        np.testing.assert_allclose(obs.noise_var[hit], (2 * h) ** 2, rtol=1e-12)
 
 
 def test_specular_surface_cells_are_dropped_with_the_drop_probability(load):
