@@ -1,6 +1,6 @@
 """Gaussian process implicit surface: squared-exponential GP on the SDF with value and
-gradient observations, heteroscedastic noise, ML-II hyperparameters, prediction,
-and two posterior samplers (dense exact reference; fast separable pathwise)."""
+gradient observations, heteroscedastic noise, ML-II hyperparameters, prediction, and
+posterior samplers (the dense exact reference; fast ones in a separable basis)."""
 
 from __future__ import annotations
 
@@ -102,7 +102,7 @@ class GPIS:
             gv = np.asarray(gradient_noise_var, dtype=float)
             gv = np.broadcast_to(gv[:, None] if gv.ndim == 1 else gv, (n, 2))
             grads, gnv = gr[g], gv[g]
-        if not (np.all(np.isfinite(X)) and np.all(np.isfinite(v)) and np.all(nv >= 0)):
+        if not (np.all(np.isfinite(X)) and np.all(np.isfinite(v)) and np.all(nv >= 0) and np.all(gnv >= 0)):
             raise ValueError("points and values must be finite and noise variances non-negative")
         self.X_ = X
         self.gradient_mask_ = g
@@ -125,9 +125,11 @@ class GPIS:
         K = self._train_cov(self.lengthscale_, self.scale_)
         K[np.diag_indices_from(K)] += self.noise_ + _JITTER * self._prior_diag()
         self.L_ = sla.cholesky(K, lower=True, check_finite=False)
-        self.alpha_ = sla.cho_solve((self.L_, True), self._residual(self.prior_mean_), check_finite=False)
-        self.log_marginal_likelihood_ = self._lml(theta0)[0]
-        self._bases: dict = {}
+        resid = self._residual(self.prior_mean_)
+        self.alpha_ = sla.cho_solve((self.L_, True), resid, check_finite=False)
+        self.log_marginal_likelihood_ = float(-0.5 * resid @ self.alpha_ - np.log(np.diag(self.L_)).sum()
+                                              - 0.5 * len(resid) * math.log(2 * math.pi))
+        self._cache: dict = {}
         return self
 
     def _residual(self, prior_mean: float) -> np.ndarray:
@@ -313,12 +315,8 @@ class GPIS:
     def _grid_index(self, xs: np.ndarray, ys: np.ndarray):
         """Flat indices of the training points in the grid ys x xs, or None if some
         training point is not a grid point (or two share one)."""
-        ix = np.searchsorted(xs, self.X_[:, 0])
-        iy = np.searchsorted(ys, self.X_[:, 1])
-        if np.any(ix >= len(xs)) or np.any(iy >= len(ys)):
-            return None
-        if not (np.allclose(xs[ix], self.X_[:, 0], rtol=0, atol=1e-12)
-                and np.allclose(ys[iy], self.X_[:, 1], rtol=0, atol=1e-12)):
+        ix, iy = _lookup(xs, self.X_[:, 0]), _lookup(ys, self.X_[:, 1])
+        if ix is None or iy is None:
             return None
         flat = iy * len(xs) + ix
         return flat if np.unique(flat).size == flat.size else None
@@ -334,7 +332,7 @@ class GPIS:
         gflat = flat[g]
         sc = math.sqrt(self.scale_)
         prior_resid = self._residual(self.prior_mean_)
-        noise_sd = np.sqrt(self.noise_)
+        noise_sd = np.sqrt(self.noise_ + _JITTER * self._prior_diag())  # as factorised in L_
         nv, ng = self.n_values_, int(g.sum())
         # Chunks of about 2 MB per grid field keep the temporaries in cache.
         chunk = chunk or max(8, min(256, 2**18 // (ny * nx)))
@@ -366,21 +364,21 @@ class GPIS:
             lo, hi = coords[0] - self.lengthscale_, coords[-1] + self.lengthscale_
             coords = np.linspace(lo, hi, int(np.ceil((hi - lo) / (0.2 * self.lengthscale_))) + 1)
         key = (axis, coords.tobytes())
-        if key not in self._bases:
-            self._bases[key] = _Basis1D(coords, self.lengthscale_)
-        return self._bases[key]
+        if key not in self._cache:
+            self._cache[key] = _Basis1D(coords, self.lengthscale_)
+        return self._cache[key]
 
     def _observation_features(self, bx: "_Basis1D", by: "_Basis1D") -> np.ndarray:
         """(D, r_y * r_x): each observed scalar as a linear function of the separable
         coefficients, i.e. f(x_n) = F[n] . vec(coef) for values, likewise for gradients."""
         key = ("features", id(bx), id(by))
-        if key not in self._bases:
+        if key not in self._cache:
             fx, dfx = bx.at(self.X_[:, 0])
             fy, dfy = by.at(self.X_[:, 1])
             g = self.gradient_mask_
             outer = lambda a, b: (a[:, :, None] * b[:, None, :]).reshape(len(a), -1)  # noqa: E731
-            self._bases[key] = np.concatenate([outer(fy, fx), outer(fy[g], dfx[g]), outer(dfy[g], fx[g])])
-        return self._bases[key]
+            self._cache[key] = np.concatenate([outer(fy, fx), outer(fy[g], dfx[g]), outer(dfy[g], fx[g])])
+        return self._cache[key]
 
     def fast_strategy(self, nx: int, ny: int, rx: int, ry: int, on_grid: bool, n: int) -> str:
         """The cheaper exact sampler for n draws on an nx x ny grid: 'pathwise' or
@@ -398,7 +396,7 @@ class GPIS:
         single-precision Cholesky factor R of the precision I + scale F^T Sigma^-1 F of
         vec(coef) / sqrt(scale); cached per pair of bases."""
         key = ("weight-space", id(bx), id(by))
-        if key not in self._bases:
+        if key not in self._cache:
             noise = self.noise_ + _JITTER * self._prior_diag()
             sc = math.sqrt(self.scale_)
             precision, rhs = self._normal_equations(bx, by, self.scale_ / noise,
@@ -406,8 +404,8 @@ class GPIS:
             precision[np.diag_indices_from(precision)] += 1.0
             R = sla.cholesky(precision, lower=True, check_finite=False)
             mean = sla.cho_solve((R, True), rhs, check_finite=False)
-            self._bases[key] = (sc * mean.reshape(by.rank, bx.rank), R.astype(np.float32))
-        return self._bases[key]
+            self._cache[key] = (sc * mean.reshape(by.rank, bx.rank), R.astype(np.float32))
+        return self._cache[key]
 
     def _normal_equations(self, bx: "_Basis1D", by: "_Basis1D", weights: np.ndarray, targets: np.ndarray):
         """F^T diag(weights) F (lower triangle at least) and F^T targets, where row n of F
@@ -523,16 +521,13 @@ class _Basis1D:
 
     def node_index(self, coords: np.ndarray) -> np.ndarray | None:
         """Index of each coordinate among the nodes, or None if one is not a node."""
-        idx = np.clip(np.searchsorted(self.nodes, np.round(coords, 12)), 0, len(self.nodes) - 1)
-        return idx if np.allclose(self.nodes[idx], coords, rtol=0.0, atol=1e-12) else None
+        return _lookup(self.nodes, coords)
 
     def at(self, coords: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Features (P, r) and their derivatives in metres (P, r) at coordinates (P,)."""
         coords = np.asarray(coords, dtype=float)
         u = len(self.nodes)
-        idx = np.searchsorted(self.nodes, np.round(coords, 12))
-        idx = np.clip(idx, 0, u - 1)
-        on_node = np.isclose(self.nodes[idx], coords, rtol=0.0, atol=1e-12)
+        idx, on_node = _nearest(self.nodes, coords)
         f = np.empty((coords.size, self.rank))
         df = np.empty((coords.size, self.rank))
         f[on_node] = self._node_features[idx[on_node]]
@@ -544,6 +539,24 @@ class _Basis1D:
             f[off], df[off] = feat[: off.sum()], feat[off.sum():]
         df /= self.lengthscale
         return f, df
+
+
+def _nearest(sorted_coords: np.ndarray, coords: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Index of the nearest entry of a sorted array for each coordinate, and whether it
+    matches to 1e-12 m."""
+    coords = np.asarray(coords, dtype=float)
+    if len(sorted_coords) == 1:
+        idx = np.zeros(coords.shape, dtype=np.int64)
+    else:
+        idx = np.clip(np.searchsorted(sorted_coords, coords), 1, len(sorted_coords) - 1)
+        idx = np.where(coords - sorted_coords[idx - 1] <= sorted_coords[idx] - coords, idx - 1, idx)
+    return idx, np.abs(sorted_coords[idx] - coords) <= 1e-12
+
+
+def _lookup(sorted_coords: np.ndarray, coords: np.ndarray) -> np.ndarray | None:
+    """Index of each coordinate in a sorted array (to 1e-12 m), or None if one is absent."""
+    idx, match = _nearest(sorted_coords, coords)
+    return idx if np.all(match) else None
 
 
 def _joint_1d(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -333,3 +333,17 @@ def test_off_node_observations_use_the_dense_fallback_with_the_same_posterior(da
     mean, var = gp.predict(P)
     assert np.abs((draws.mean(0) - mean) / np.sqrt(var / n)).max() < 4.5
     assert np.abs(draws.var(0) / var - 1).max() < 4.5 * np.sqrt(2 / n)
+
+
+def test_log_marginal_likelihood_is_the_gaussian_log_density_of_the_data(data, gp):
+    from scipy.stats import multivariate_normal
+
+    X, values, noise, grads, gnoise = data
+    g = ~np.isnan(grads).any(1)
+    K = fd_cov(X, X[g], X, X[g]) + np.diag(np.concatenate([noise, gnoise[g, 0], gnoise[g, 1]]))
+    y = np.concatenate([values, grads[g, 0], grads[g, 1]])
+    mean = np.concatenate([np.full(len(X), M0), np.zeros(2 * g.sum())])
+    ref = multivariate_normal(mean, K).logpdf(y)
+    # Finite-difference covariance blocks and the 1e-10 jitter limit the agreement.
+    assert gp.log_marginal_likelihood_ == pytest.approx(ref, abs=1e-3)
+    assert gp.log_marginal_likelihood() == pytest.approx(gp.log_marginal_likelihood_, rel=1e-12)

@@ -100,26 +100,28 @@ radius = 0.03
 # The calibration scenes and the exact SDF
 
 
-def test_calibration_rectangle_has_the_documented_geometry():
-    scene = load_scene(REPO / "scenes" / "rectangle.toml")
+def load_calibration(name):
+    """A calibration scene, after checking the settings both share: grid extent 0.2 m,
+    M = 40, fully observed with 0.5 mm noise, friction 0.5, opening 0.10 m, jaw 0.01 m."""
+    scene = load_scene(REPO / "scenes" / f"{name}.toml")
     assert (scene.grid.size, scene.grid.extent) == (40, 0.2)
-    assert scene.shape.bounds == pytest.approx((-0.03, -0.015, 0.03, 0.015), abs=1e-15)
-    assert scene.shape.area == pytest.approx(0.06 * 0.03, rel=1e-12)
     assert scene.sensor.noise == pytest.approx(0.0005, rel=1e-12)
     assert scene.sensor.regions == () and scene.sensor.interior_keep == 1.0
     assert scene.physics.friction == 0.5
     assert (scene.gripper.opening, scene.gripper.jaw_width) == (0.10, 0.01)
+    return scene
+
+
+def test_calibration_rectangle_has_the_documented_geometry():
+    scene = load_calibration("rectangle")
+    assert scene.shape.bounds == pytest.approx((-0.03, -0.015, 0.03, 0.015), abs=1e-15)
+    assert scene.shape.area == pytest.approx(0.06 * 0.03, rel=1e-12)
 
 
 def test_calibration_disk_has_the_documented_geometry():
-    scene = load_scene(REPO / "scenes" / "disk.toml")
-    assert (scene.grid.size, scene.grid.extent) == (40, 0.2)
+    scene = load_calibration("disk")
     assert scene.shape.area == pytest.approx(polygon_area(DISK_SIDES, 0.03), rel=1e-12)
     assert scene.shape.centroid.coords[0] == pytest.approx((0.0, 0.0), abs=1e-15)
-    assert scene.sensor.noise == pytest.approx(0.0005, rel=1e-12)
-    assert scene.sensor.regions == () and scene.sensor.interior_keep == 1.0
-    assert scene.physics.friction == 0.5
-    assert (scene.gripper.opening, scene.gripper.jaw_width) == (0.10, 0.01)
 
 
 def test_rectangle_sdf_equals_the_closed_form_on_the_calibration_grid():
