@@ -32,8 +32,7 @@ def _sampling_row(scene_name: str, size: int, exact_max_mb: float) -> dict:
     from harness.scene import load_scene
     from harness.seeding import stream
 
-    overrides = {"grid": {"size": size, **SAMPLING_PHYSICAL["grid"]}, "gpis": SAMPLING_PHYSICAL["gpis"]}
-    scene = load_scene(scene_name, overrides=overrides)
+    scene = load_scene(scene_name, overrides=_sampling_overrides(size))
     fit_s, fast_s = math.inf, math.inf
     for r in range(REPEATS):
         t0 = time.perf_counter()
@@ -95,9 +94,17 @@ def _active_set_effect(scene_name: str) -> dict:
     }
 
 
+def _sampling_overrides(size: int) -> dict:
+    return {"grid": {"size": size, **SAMPLING_PHYSICAL["grid"]}, "gpis": SAMPLING_PHYSICAL["gpis"]}
+
+
 def sampling(sizes=SAMPLING_SIZES, exact_max_mb: float = 2500.0, scene: str = SAMPLING_SCENE) -> dict:
     """Fit and sampling times over grid sizes, the exact/fast ratio at M = 55 and the
     growth exponent of the fast sampler."""
+    from harness.scene import load_scene
+
+    for m in sizes:  # every size must make a valid scene, before any work
+        load_scene(scene, overrides=_sampling_overrides(m))
     rows = [_in_fresh_process(_sampling_row, scene, m, exact_max_mb) for m in sizes]
     ms = np.array([r["M"] for r in rows], dtype=float)
     fast = np.array([r["fast_s"] for r in rows])

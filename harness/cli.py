@@ -31,6 +31,13 @@ def _seed(text: str) -> int:
     return value
 
 
+def _sizes(text: str) -> list[int]:
+    try:
+        return [int(v) for v in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated integers like 25,40,55, got {text!r}") from None
+
+
 def _scenes_list(args) -> int:
     from harness.scene import library_names, load_scene
 
@@ -127,7 +134,7 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     bench.add_argument("--exact-max-mb", type=float, default=2500.0,
                        help="skip the dense exact sampler when its covariance exceeds this (default 2500)")
-    bench.add_argument("--sizes", type=lambda s: [int(v) for v in s.split(",")], default=None,
+    bench.add_argument("--sizes", type=_sizes, default=None,
                        help="grid sizes M, comma-separated (default 25,40,55,70,100,200)")
     bench.set_defaults(func=_bench)
     return parser

@@ -13,6 +13,10 @@ class InputError(Exception):
         self.message = " ".join(str(message).split())
         super().__init__(str(self))
 
+    def __reduce__(self):
+        # Crosses process boundaries (worker pools) with its three parts intact.
+        return (InputError, (self.source, self.field, self.message))
+
     def __str__(self) -> str:
         where = f"{self.source}: {self.field}" if self.field else self.source
         return f"{where}: {self.message}"

@@ -27,7 +27,8 @@ def test_scenes_list_names_every_library_scene(capsys):
 
 def test_bad_command_line_gets_one_line_and_exit_code_2(capsys):
     for argv in (["scenes", "show"], ["bogus"], ["scenes", "show", "disk", "--seed", "-3"],
-                 ["scenes", "show", "no_such_scene"], ["scenes", "show", "disk", "--out", "x.jpg"]):
+                 ["scenes", "show", "no_such_scene"], ["scenes", "show", "disk", "--out", "x.jpg"],
+                 ["bench", "sampling", "--sizes", "5"], ["bench", "sampling", "--sizes", "2x"]):
         assert main(argv) == 2, argv
         err = capsys.readouterr().err
         assert len(err.strip().splitlines()) == 1 and err.startswith("gpis-harness: error: "), (argv, err)
@@ -43,3 +44,12 @@ def test_bench_sampling_json_has_the_contracted_fields():
         assert row["fast_s"] > 0 and row["exact_s"] > 0 and row["peak_mb"] > 0
     assert result["ratio_exact_over_fast_at_55"] is None  # M = 55 not measured here
     assert isinstance(result["fast_growth_exponent"], float)
+
+
+def test_input_errors_survive_a_trip_between_processes():
+    import pickle
+
+    from harness.errors import InputError
+
+    err = pickle.loads(pickle.dumps(InputError("scene.toml", "grid.size", "5 is out of range [8, 1024]")))
+    assert (err.source, err.field, str(err)) == ("scene.toml", "grid.size", "scene.toml: grid.size: 5 is out of range [8, 1024]")
