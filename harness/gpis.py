@@ -431,6 +431,8 @@ class GPIS:
         yy_rows, xx_rows = [], []
         rhs = np.zeros((ry, rx))
         for ys, xs, rows, cols, part in parts:
+            if part.stop == part.start:
+                continue
             image = np.zeros((len(ys), len(xs)))
             np.add.at(image, (rows, cols), weights[part])
             used = np.flatnonzero(image.any(axis=1))

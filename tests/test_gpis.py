@@ -347,3 +347,18 @@ def test_log_marginal_likelihood_is_the_gaussian_log_density_of_the_data(data, g
     # Finite-difference covariance blocks and the 1e-10 jitter limit the agreement.
     assert gp.log_marginal_likelihood_ == pytest.approx(ref, abs=1e-3)
     assert gp.log_marginal_likelihood() == pytest.approx(gp.log_marginal_likelihood_, rel=1e-12)
+
+
+@pytest.mark.parametrize("method", ["exact", "fast"])
+def test_a_gpis_without_gradient_observations_samples_its_posterior(data, method):
+    X, values, noise, _, _ = data
+    gp = GPIS(lengthscale=L, scale=C, prior_mean=M0).fit(X, values, noise)
+    P = np.random.default_rng(16).uniform(-0.06, 0.06, (30, 2))
+    n = 4000
+    draws = gp.sample(P, n, np.random.default_rng(17), method=method)
+    mean, var = gp.predict(P)
+    assert np.abs((draws.mean(0) - mean) / np.sqrt(var / n)).max() < 4.5
+    assert np.abs(draws.var(0) / var - 1).max() < 4.5 * np.sqrt(2 / n)
+    xs = np.linspace(-0.05, 0.05, 9)
+    grid_values, grid_grads = gp.sample_grid(xs, xs, 50, np.random.default_rng(18), method=method)
+    assert grid_values.shape == (50, 9, 9) and np.isfinite(grid_grads).all()
