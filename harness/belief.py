@@ -77,6 +77,18 @@ class Belief:
             return np.full(2, np.nan)
         return np.array([shape.centroid.x, shape.centroid.y])
 
+    @cached_property
+    def characteristic_length(self) -> float:
+        """The largest distance (m) from the mean shape's centre of mass to its outline:
+        the length that makes torque comparable with force in the Ferrari-Canny quality
+        (a unit force at the farthest point gives a unit scaled torque). Half the gripper
+        opening when the mean has no inside."""
+        shape = self.mean_shape
+        if shape.is_empty:
+            return 0.5 * self.scene.gripper.opening
+        outline = np.asarray(shape.exterior.coords)
+        return float(np.linalg.norm(outline - self.center_of_mass, axis=1).max())
+
     def sample(self, n: int, rng: np.random.Generator, method: str = "fast") -> ShapeSamples:
         """``n`` posterior shapes on the grid (values and gradients); see GPIS.sample_grid."""
         c = self.grid.coords

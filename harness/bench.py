@@ -118,19 +118,80 @@ def sampling(sizes=SAMPLING_SIZES, exact_max_mb: float = 2500.0, scene: str = SA
     }
 
 
+#: Grid sizes of the P_F timing.
+PLANNING_SIZES = (25, 50, 100, 200)
+PF_REPEATS = 7
+
+
+def _p_f_row(scene_name: str, size: int) -> dict:
+    """One grid size, in a fresh process: draw the evaluation once, then time one P_F
+    estimate with 1000 paired draws (best of PF_REPEATS after a warm-up)."""
+    from harness.belief import build_belief
+    from harness.grasp import Grasp
+    from harness.quality import default_streams, draw_evaluation, estimate_p_f
+    from harness.scene import load_scene
+    from harness.seeding import stream
+
+    scene = load_scene(scene_name, overrides=_sampling_overrides(size))
+    belief = build_belief(scene, stream(0, "bench", size, "sensor"))
+    t0 = time.perf_counter()
+    draws = draw_evaluation(belief, SAMPLES, *default_streams(0, "bench", size))
+    draws.shapes.twist, draws.shapes.center_of_mass  # noqa: B018  (set-up counted here)
+    draws_s = time.perf_counter() - t0
+    grasp = Grasp.from_centre((0.0, 0.0), 0.3, 0.09)
+    gripper = scene.gripper
+    args = (grasp, draws, gripper.sigma_g, scene.physics.friction, gripper.opening, gripper.jaw_width)
+    estimate = estimate_p_f(*args)[0]
+    best = math.inf
+    for _ in range(PF_REPEATS):
+        t0 = time.perf_counter()
+        estimate_p_f(*args)
+        best = min(best, time.perf_counter() - t0)
+    return {"M": size, "p_f_s": best, "draws_s": draws_s, "p_f": estimate.p_f, "peak_mb": _peak_mb()}
+
+
+def planning(sizes=PLANNING_SIZES, scene: str = SAMPLING_SCENE) -> dict:
+    """Seconds per P_F estimate (1000 paired draws) over grid sizes, and its growth."""
+    from harness.scene import load_scene
+
+    for m in sizes:
+        load_scene(scene, overrides=_sampling_overrides(m))
+    rows = [_in_fresh_process(_p_f_row, scene, m) for m in sizes]
+    ms = np.array([r["M"] for r in rows], dtype=float)
+    times = np.array([r["p_f_s"] for r in rows])
+    exponent = float(np.polyfit(np.log(ms), np.log(times), 1)[0]) if len(rows) > 1 else None
+    at50 = next((r["p_f_s"] for r in rows if r["M"] == 50), None)
+    return {"scene": scene, "draws": SAMPLES, "grasp": "through the centre at 0.3 rad, width 0.09 m",
+            "rows": rows, "p_f_s_at_50": at50, "p_f_growth_exponent": exponent}
+
+
 def run(which: str = "all", exact_max_mb: float = 2500.0, sizes=None) -> dict:
     """Run the named benchmark(s); returns a JSON-ready dict."""
     results = {}
     if which in ("sampling", "all"):
         results["sampling"] = sampling(tuple(sizes or SAMPLING_SIZES), exact_max_mb)
-    return results["sampling"] if which == "sampling" else results
+    if which in ("planning", "all"):
+        results["planning"] = planning(tuple(sizes or PLANNING_SIZES))
+    return results[which] if which != "all" else results
 
 
 def format_results(results: dict) -> str:
     """A human-readable table of benchmark results."""
-    sections = results if "rows" not in results else {"sampling": results}
+    if "rows" in results:
+        results = {("sampling" if "active_set_effect" in results else "planning"): results}
     lines = []
-    for name, res in sections.items():
+    for name, res in results.items():
+        if name == "planning":
+            lines.append(f"planning: one P_F estimate with {res['draws']} paired draws, scene '{res['scene']}', "
+                         f"grasp {res['grasp']}")
+            lines.append(f"{'M':>5} {'P_F ms':>8} {'draws s':>8} {'P_F':>6} {'peak MB':>8}")
+            for r in res["rows"]:
+                lines.append(f"{r['M']:>5} {r['p_f_s'] * 1e3:>8.2f} {r['draws_s']:>8.2f} {r['p_f']:>6.3f} "
+                             f"{r['peak_mb']:>8.0f}")
+            if res["p_f_s_at_50"] is not None:
+                lines.append(f"P_F estimate at M = 50: {res['p_f_s_at_50'] * 1e3:.2f} ms (the original: 1.1 to 2.5 s)")
+            if res["p_f_growth_exponent"] is not None:
+                lines.append(f"P_F growth exponent (log time vs log M): {res['p_f_growth_exponent']:.2f}")
         if name == "sampling":
             lines.append(f"sampling: {res['samples']} grid samples (values + gradients), scene '{res['scene']}'")
             lines.append(f"{'M':>5} {'fit s':>8} {'fast s':>8} {'exact s':>9} {'peak MB':>9} {'D':>6} {'r':>4}  method")

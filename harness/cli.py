@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
+import os
 import sys
 import traceback
 from pathlib import Path
@@ -97,6 +99,67 @@ def _scenes_render(args) -> int:
     return 0
 
 
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
+    if not 1 <= value <= 1_000_000:
+        raise argparse.ArgumentTypeError(f"must be between 1 and 1000000, got {value}")
+    return value
+
+
+def _non_negative(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not (math.isfinite(value) and value >= 0):
+        raise argparse.ArgumentTypeError(f"must be a finite number >= 0, got {text}")
+    return value
+
+
+def _coordinate(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a coordinate in metres, got {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"coordinates must be finite, got {text}")
+    return value
+
+
+def _quality(args) -> int:
+    from harness.belief import build_belief
+    from harness.grasp import Grasp
+    from harness.quality import default_streams, draw_evaluation, estimate_p_f
+    from harness.scene import load_scene
+    from harness.seeding import stream
+
+    scene = load_scene(args.scene)
+    grasp = Grasp(tuple(args.grasp[:2]), tuple(args.grasp[2:]))
+    problem = grasp.problem(scene.grid, scene.gripper.opening)
+    if problem:
+        raise InputError("--grasp", None, problem)
+    sigma_g = scene.gripper.sigma_g if args.sigma_g is None else args.sigma_g
+    friction = scene.physics.friction if args.friction is None else args.friction
+    belief = build_belief(scene, stream(args.seed, scene.name, 0, "sensor"))
+    draws = draw_evaluation(belief, args.samples, *default_streams(args.seed, scene.name))
+    est = estimate_p_f(grasp, draws, sigma_g, friction, scene.gripper.opening, scene.gripper.jaw_width,
+                       args.friction_spread)[0]
+    if args.json:
+        out = est.as_dict() | {"scene": scene.name, "grasp": {"g1": list(grasp.g1), "g2": list(grasp.g2)},
+                               "sigma_g": sigma_g, "friction": friction, "friction_spread": args.friction_spread,
+                               "seed": args.seed}
+        print(json.dumps(out))
+    else:
+        fails = ", ".join(f"{k} {v}" for k, v in est.failures.items())
+        print(f"{scene.name}: P_F = {est.p_f:.3f} (95% CI {est.ci_low:.3f} to {est.ci_high:.3f}) over "
+              f"{est.samples} draws, sigma_g = {sigma_g:g} m, friction = {friction:g}")
+        print(f"failures: {fails}; mean Ferrari-Canny quality {est.ferrari_canny_mean:.4f}")
+    return 0
+
+
 def _bench(args) -> int:
     from harness import bench
 
@@ -129,13 +192,29 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=_seed, default=0, help="experiment seed (default 0)")
     p.set_defaults(func=_scenes_render)
 
+    p = sub.add_parser("quality", help="Monte-Carlo probability of force closure of one grasp")
+    p.add_argument("scene", help="library name or path to a scene file")
+    p.add_argument("--grasp", nargs=4, type=_coordinate, required=True, metavar=("X1", "Y1", "X2", "Y2"),
+                   help="jaw start points g1 and g2 in metres")
+    p.add_argument("--samples", type=_positive_int, default=1000, help="paired draws (default 1000)")
+    p.add_argument("--seed", type=_seed, default=0, help="experiment seed (default 0)")
+    p.add_argument("--sigma-g", type=_non_negative, default=None,
+                   help="approach noise std per jaw start, metres (default: the scene's gripper.sigma_g)")
+    p.add_argument("--friction", type=_non_negative, default=None,
+                   help="Coulomb friction coefficient (default: the scene's physics.friction)")
+    p.add_argument("--friction-spread", type=_non_negative, default=0.0,
+                   help="std of the friction coefficient across draws (default 0)")
+    p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    p.set_defaults(func=_quality)
+
     bench = sub.add_parser("bench", help="benchmarks, measured as ratios in one run")
-    bench.add_argument("which", nargs="?", default="all", choices=["sampling", "all"])
+    bench.add_argument("which", nargs="?", default="all", choices=["sampling", "planning", "all"])
     bench.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     bench.add_argument("--exact-max-mb", type=float, default=2500.0,
                        help="skip the dense exact sampler when its covariance exceeds this (default 2500)")
     bench.add_argument("--sizes", type=_sizes, default=None,
-                       help="grid sizes M, comma-separated (default 25,40,55,70,100,200)")
+                       help="grid sizes M, comma-separated (defaults: sampling 25,40,55,70,100,200; "
+                            "planning 25,50,100,200)")
     bench.set_defaults(func=_bench)
     return parser
 
@@ -151,6 +230,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"{PROG}: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # the reader went away (e.g. `| head`): stop quietly
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141
     except Exception:  # an internal error: the traceback helps the bug report
         traceback.print_exc()
         print(f"{PROG}: internal error (please report it with the traceback above)", file=sys.stderr)

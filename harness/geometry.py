@@ -67,6 +67,20 @@ def signed_distance(geometry: BaseGeometry, points: np.ndarray) -> np.ndarray:
     return np.where(inside, -dist, dist)
 
 
+def signed_distance_gradient(geometry: BaseGeometry, points: np.ndarray) -> np.ndarray:
+    """Exact gradient (P, 2) of the signed distance: the unit vector from the nearest
+    boundary point, pointing outwards; zero on the boundary itself."""
+    p = np.asarray(points, dtype=float)
+    lines = shapely.shortest_line(geometry.boundary, shapely.points(p))
+    nearest = shapely.get_coordinates(lines)[0::2]
+    away = p - nearest
+    dist = np.linalg.norm(away, axis=1)
+    inside = shapely.contains_xy(geometry, p[:, 0], p[:, 1])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        unit = np.where(dist[:, None] > 0, away / dist[:, None], 0.0)
+    return np.where(inside[:, None], -unit, unit)
+
+
 def grid_sdf(geometry: BaseGeometry, grid: Grid, truncation: float | None = None) -> np.ndarray:
     """Signed distance field of ``geometry`` at the grid's cell centres, shape (M, M),
     clipped to [-truncation, truncation] when a truncation is given."""
@@ -74,6 +88,15 @@ def grid_sdf(geometry: BaseGeometry, grid: Grid, truncation: float | None = None
     if truncation is not None:
         field = np.clip(field, -truncation, truncation)
     return field
+
+
+def grid_sdf_gradient(geometry: BaseGeometry, grid: Grid, truncation: float | None = None) -> np.ndarray:
+    """Gradient (M, M, 2) of :func:`grid_sdf`: exact, and zero where the field is clipped."""
+    grad = signed_distance_gradient(geometry, grid.points).reshape(grid.size, grid.size, 2)
+    if truncation is not None:
+        clipped = np.abs(signed_distance(geometry, grid.points)).reshape(grid.size, grid.size) >= truncation
+        grad[clipped] = 0.0
+    return grad
 
 
 def polygons(geometry: BaseGeometry) -> list[Polygon]:

@@ -25,7 +25,7 @@ from shapely.geometry import Point, Polygon, box
 from shapely.geometry.base import BaseGeometry
 
 from harness.errors import InputError
-from harness.geometry import Grid, grid_sdf, inside_region, largest_region, polygons
+from harness.geometry import Grid, grid_sdf, grid_sdf_gradient, inside_region, largest_region, polygons
 from harness.sensor import REGION_KINDS, Region, SensorModel
 
 LIBRARY = Path(os.environ.get("GPIS_HARNESS_SCENES", Path(__file__).resolve().parent.parent / "scenes"))
@@ -66,6 +66,7 @@ class Gripper:
 
     opening: float = 0.10
     jaw_width: float = 0.01
+    sigma_g: float = 0.0025  # approach noise: std of each jaw start's placement error
 
 
 @dataclass(frozen=True)
@@ -87,6 +88,11 @@ class Scene:
     def true_sdf(self) -> np.ndarray:
         """Exact signed distance of the true shape at the cell centres, truncated, (M, M)."""
         return grid_sdf(self.shape, self.grid, self.truncation)
+
+    @cached_property
+    def true_sdf_gradient(self) -> np.ndarray:
+        """Exact gradient of :attr:`true_sdf`, (M, M, 2); zero where it is truncated."""
+        return grid_sdf_gradient(self.shape, self.grid, self.truncation)
 
 
 
@@ -176,6 +182,7 @@ def parse_scene(data: dict, source: str, base_dir: Path, default_name: str = "sc
     gripper = Gripper(
         opening=gr.length("opening", cell, default=Gripper.opening, lo=0.0, hi=10.0),
         jaw_width=gr.length("jaw_width", cell, default=Gripper.jaw_width, lo=0.0, hi=10.0),
+        sigma_g=gr.length("sigma_g", cell, default=Gripper.sigma_g, lo=0.0, hi=1.0, lo_open=False),
     )
     gr.finish()
     root.finish()

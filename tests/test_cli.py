@@ -28,7 +28,12 @@ def test_scenes_list_names_every_library_scene(capsys):
 def test_bad_command_line_gets_one_line_and_exit_code_2(capsys):
     for argv in (["scenes", "show"], ["bogus"], ["scenes", "show", "disk", "--seed", "-3"],
                  ["scenes", "show", "no_such_scene"], ["scenes", "show", "disk", "--out", "x.jpg"],
-                 ["bench", "sampling", "--sizes", "5"], ["bench", "sampling", "--sizes", "2x"]):
+                 ["bench", "sampling", "--sizes", "5"], ["bench", "sampling", "--sizes", "2x"],
+                 ["quality", "disk", "--grasp", "-0.06", "0", "0.06", "0"],  # wider than the opening
+                 ["quality", "disk", "--grasp", "-0.3", "0", "0", "0"],  # outside the grid
+                 ["quality", "disk", "--grasp", "0", "0", "0"], ["quality", "disk", "--grasp", "0", "0", "0", "x"],
+                 ["quality", "disk", "--grasp", "-0.04", "0", "0.04", "0", "--sigma-g", "-1"],
+                 ["quality", "disk", "--grasp", "-0.04", "0", "0.04", "0", "--samples", "0"]):
         assert main(argv) == 2, argv
         err = capsys.readouterr().err
         assert len(err.strip().splitlines()) == 1 and err.startswith("gpis-harness: error: "), (argv, err)
@@ -53,3 +58,25 @@ def test_input_errors_survive_a_trip_between_processes():
 
     err = pickle.loads(pickle.dumps(InputError("scene.toml", "grid.size", "5 is out of range [8, 1024]")))
     assert (err.source, err.field, str(err)) == ("scene.toml", "grid.size", "scene.toml: grid.size: 5 is out of range [8, 1024]")
+
+
+def test_quality_json_holds_the_estimate_its_interval_and_failures(capsys):
+    argv = ["quality", "disk", "--grasp", "-0.045", "0", "0.045", "0", "--samples", "300", "--seed", "2",
+            "--sigma-g", "0.002", "--friction", "0.5", "--json"]
+    assert main(argv) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert {"p_f", "ci_low", "ci_high", "samples", "failures", "ferrari_canny_mean"} <= set(out)
+    assert out["samples"] == 300 and out["ci_low"] <= out["p_f"] <= out["ci_high"]
+    assert set(out["failures"]) == {"too_wide", "missed", "degenerate_normal", "friction_cone"}
+    assert out["p_f"] * 300 + sum(out["failures"].values()) == 300
+    assert main(argv) == 0  # the same seed gives the same numbers
+    assert json.loads(capsys.readouterr().out) == out
+
+
+def test_bench_planning_json_reports_seconds_per_estimate():
+    proc = subprocess.run([sys.executable, "-m", "harness", "bench", "planning", "--sizes", "20,25", "--json"],
+                          capture_output=True, text=True, timeout=600, check=True)
+    result = json.loads(proc.stdout)
+    assert [r["M"] for r in result["rows"]] == [20, 25]
+    assert all(r["p_f_s"] > 0 and 0 <= r["p_f"] <= 1 for r in result["rows"])
+    assert result["p_f_s_at_50"] is None and isinstance(result["p_f_growth_exponent"], float)

@@ -1,0 +1,163 @@
+"""Monte-Carlo probability of force closure (P_F) with paired draws over shape samples,
+approach noise and friction, its Wilson interval, and failure counts by reason."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+
+from harness.belief import Belief
+from harness.grasp import (DEGENERATE, MISSED, OK, TOO_WIDE, Grasp, SDFBatch, ferrari_canny, find_contacts,
+                           force_closure)
+
+#: Failure reasons, in the order a draw is classified (the first that applies).
+FAILURE_REASONS = ("too_wide", "missed", "degenerate_normal", "friction_cone")
+#: Two-sided 95 % normal quantile.
+Z95 = 1.959963984540054
+
+
+def wilson_interval(successes, n, z: float = Z95) -> tuple[np.ndarray, np.ndarray]:
+    """Wilson score interval for a binomial proportion (vectorised); (nan, nan) for n = 0."""
+    k = np.asarray(successes, dtype=float)
+    n = np.asarray(n, dtype=float)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        p = k / n
+        denom = 1.0 + z * z / n
+        centre = (p + z * z / (2 * n)) / denom
+        half = z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
+    # At k = 0 and k = n the bounds are exactly 0 and 1; rounding must not leave the
+    # estimate outside its own interval.
+    lo = np.where(k == 0, 0.0, np.clip(centre - half, 0.0, 1.0))
+    hi = np.where(k == n, 1.0, np.clip(centre + half, 0.0, 1.0))
+    return (lo[()], hi[()]) if lo.ndim == 0 else (lo, hi)
+
+
+@dataclass(frozen=True)
+class EvaluationDraws:
+    """The common random numbers of one belief: n shape samples (as a field batch) and,
+    paired with them, standard-normal approach offsets (n, 2, 2) for g1 and g2 and
+    standard-normal friction deviates (n,). Every grasp compared on this belief is judged
+    on the same draws; sigma_g and the friction spread scale the deviates at use."""
+
+    shapes: SDFBatch
+    approach: np.ndarray
+    friction: np.ndarray
+    torque_scale: float
+
+    def __len__(self) -> int:
+        return len(self.approach)
+
+
+def draw_evaluation(belief: Belief, n: int, shapes_rng: np.random.Generator,
+                    approach_rng: np.random.Generator, friction_rng: np.random.Generator) -> EvaluationDraws:
+    """Draw n paired evaluation draws for a belief (shape samples once per belief)."""
+    shapes = belief.sample(n, shapes_rng)
+    return EvaluationDraws(
+        shapes=SDFBatch(belief.grid, shapes.values, shapes.gradients),
+        approach=approach_rng.standard_normal((n, 2, 2)),
+        friction=friction_rng.standard_normal(n),
+        torque_scale=belief.characteristic_length,
+    )
+
+
+@dataclass(frozen=True)
+class QualityEstimate:
+    """P_F of one grasp: the estimate, its Wilson 95 % interval, the number of draws,
+    failures by reason and the mean Ferrari-Canny quality (0 for a failed draw)."""
+
+    p_f: float
+    ci_low: float
+    ci_high: float
+    samples: int
+    failures: dict
+    ferrari_canny_mean: float
+
+    def as_dict(self) -> dict:
+        return {"p_f": self.p_f, "ci_low": self.ci_low, "ci_high": self.ci_high, "samples": self.samples,
+                "failures": dict(self.failures), "ferrari_canny_mean": self.ferrari_canny_mean}
+
+
+@dataclass(frozen=True)
+class DrawOutcomes:
+    """Per-draw results (G, n) for G grasps: force closure, failure reason index into
+    FAILURE_REASONS (-1 for success) and Ferrari-Canny quality."""
+
+    closure: np.ndarray
+    reason: np.ndarray
+    ferrari_canny: np.ndarray
+
+    @cached_property
+    def estimates(self) -> list[QualityEstimate]:
+        n = self.closure.shape[1]
+        k = self.closure.sum(axis=1)
+        lo, hi = wilson_interval(k, n)
+        counts = np.stack([(self.reason == r).sum(axis=1) for r in range(len(FAILURE_REASONS))], axis=1)
+        fc = self.ferrari_canny.mean(axis=1)
+        return [QualityEstimate(float(k[g] / n), float(lo[g]), float(hi[g]), n,
+                                {name: int(counts[g, r]) for r, name in enumerate(FAILURE_REASONS)}, float(fc[g]))
+                for g in range(len(k))]
+
+
+def evaluate_draws(grasps, draws: EvaluationDraws, sigma_g: float, friction: float, opening: float,
+                   jaw_width: float, friction_spread: float = 0.0) -> DrawOutcomes:
+    """Judge G grasps ((G, 2, 2) jaw starts, or Grasp objects) on every paired draw.
+
+    Draw i perturbs g1 and g2 by sigma_g times its approach deviates, uses shape sample
+    i, and friction max(0, friction + friction_spread * deviate). A perturbed pair wider
+    than the gripper's opening is narrowed symmetrically to the opening (the gripper
+    cannot open further). A draw fails, in this order, when a jaw starts inside the
+    shape (too_wide), when no object lies between the jaws (missed), when a contact
+    normal is undefined (degenerate_normal), or when the grasp is not in force closure
+    (friction_cone).
+    """
+    starts = _as_starts(grasps)
+    g, n = len(starts), len(draws)
+    g1 = (starts[:, None, 0, :] + sigma_g * draws.approach[None, :, 0, :]).reshape(-1, 2)
+    g2 = (starts[:, None, 1, :] + sigma_g * draws.approach[None, :, 1, :]).reshape(-1, 2)
+    g1, g2 = _within_opening(g1, g2, opening)
+    field = np.tile(np.arange(n), g)
+    gamma = np.tile(np.maximum(0.0, friction + friction_spread * draws.friction), g)
+    contacts = find_contacts(draws.shapes, g1, g2, jaw_width, field_index=field)
+    ok = contacts.status == OK
+    closure = np.zeros(g * n, dtype=bool)
+    quality = np.zeros(g * n)
+    args = (contacts.c1[ok], contacts.c2[ok], contacts.n1[ok], contacts.n2[ok], gamma[ok])
+    closure[ok] = force_closure(*args)
+    quality[ok] = ferrari_canny(*args, draws.shapes.center_of_mass[field[ok]], draws.torque_scale)
+    reason = np.full(g * n, -1, dtype=np.int8)
+    reason[~ok & (contacts.status == TOO_WIDE)] = FAILURE_REASONS.index("too_wide")
+    reason[~ok & (contacts.status == MISSED)] = FAILURE_REASONS.index("missed")
+    reason[~ok & (contacts.status == DEGENERATE)] = FAILURE_REASONS.index("degenerate_normal")
+    reason[ok & ~closure] = FAILURE_REASONS.index("friction_cone")
+    return DrawOutcomes(closure.reshape(g, n), reason.reshape(g, n), quality.reshape(g, n))
+
+
+def estimate_p_f(grasps, draws: EvaluationDraws, sigma_g: float, friction: float, opening: float,
+                 jaw_width: float, friction_spread: float = 0.0) -> list[QualityEstimate]:
+    """P_F estimates of G grasps on the same paired draws (see :func:`evaluate_draws`)."""
+    return evaluate_draws(grasps, draws, sigma_g, friction, opening, jaw_width, friction_spread).estimates
+
+
+def _as_starts(grasps) -> np.ndarray:
+    if isinstance(grasps, Grasp):
+        grasps = [grasps]
+    if isinstance(grasps, (list, tuple)) and grasps and isinstance(grasps[0], Grasp):
+        return np.stack([gr.array for gr in grasps])
+    return np.asarray(grasps, dtype=float).reshape(-1, 2, 2)
+
+
+def _within_opening(g1: np.ndarray, g2: np.ndarray, opening: float):
+    """Narrow each pair wider than the opening symmetrically about its midpoint."""
+    d = g2 - g1
+    width = np.linalg.norm(d, axis=1)
+    shrink = np.where(width > opening, (width - opening) / (2 * np.maximum(width, 1e-300)), 0.0)[:, None]
+    return g1 + shrink * d, g2 - shrink * d
+
+
+def default_streams(seed: int, scene_name: str, realisation: int = 0):
+    """The named random streams of one belief's evaluation (see harness.seeding)."""
+    from harness.seeding import stream
+
+    return tuple(stream(seed, scene_name, realisation, purpose) for purpose in ("shapes", "approach", "friction"))

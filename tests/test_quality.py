@@ -1,0 +1,154 @@
+"""The P_F estimator: deterministic answers on the calibration rectangle, behaviour under
+approach noise, common random numbers, failure reasons and the Wilson interval."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.stats import binom
+
+from harness.belief import build_belief
+from harness.grasp import Grasp, find_contacts
+from harness.quality import (FAILURE_REASONS, _within_opening, default_streams, draw_evaluation, estimate_p_f,
+                             evaluate_draws, wilson_interval)
+from harness.scene import load_scene
+from harness.seeding import stream
+
+FRICTION, OPENING, JAW = 0.5, 0.10, 0.01
+
+
+@pytest.fixture(scope="module")
+def rectangle():
+    scene = load_scene("rectangle")
+    belief = build_belief(scene, stream(0, "rectangle", 0, "sensor"))
+    return belief, draw_evaluation(belief, 1000, *default_streams(0, "rectangle"))
+
+
+def through_centre(angle_deg: float) -> Grasp:
+    """A grasp through the rectangle's centre whose jaws start outside it."""
+    return Grasp.from_centre((0.0, 0.0), math.radians(angle_deg), 0.09)
+
+
+def test_p_f_without_approach_noise_is_the_deterministic_answer(rectangle):
+    """10 degrees: the axis meets the short sides 10 degrees off their normal, inside the
+    friction cone (atan 0.5 = 26.6 degrees); 40 degrees: it meets the long sides 50
+    degrees off their normal, outside it."""
+    _, draws = rectangle
+    at10, at40 = estimate_p_f([through_centre(10), through_centre(40)], draws, 0.0, FRICTION, OPENING, JAW)
+    assert at10.p_f == 1.0 and at10.failures == dict.fromkeys(FAILURE_REASONS, 0)
+    assert at40.p_f == 0.0 and at40.failures["friction_cone"] == 1000
+    assert at10.ferrari_canny_mean > 0 and at40.ferrari_canny_mean == 0
+    assert (at10.ci_low, at10.ci_high) == pytest.approx(wilson_interval(1000, 1000), abs=1e-15)
+
+
+def test_p_f_falls_as_approach_noise_grows_near_a_corner(rectangle):
+    """Jaws closing along x at y = 12 mm, 3 mm below the corner: with more noise, more
+    draws slide the plates onto the corner's rounded normals."""
+    _, draws = rectangle
+    grasp = Grasp((-0.045, 0.012), (0.045, 0.012))
+    p = [estimate_p_f(grasp, draws, s, FRICTION, OPENING, JAW)[0].p_f for s in (0.0, 0.002, 0.004, 0.008)]
+    # The same draws at every sigma (common random numbers), so the decrease is not noise.
+    assert all(a >= b for a, b in zip(p, p[1:])), p
+    assert p[0] == 1.0 and p[-1] < 0.8
+
+
+def test_grasps_judged_together_share_every_draw(rectangle):
+    _, draws = rectangle
+    grasps = [through_centre(10), Grasp((-0.045, 0.012), (0.045, 0.012))]
+    together = evaluate_draws(grasps, draws, 0.004, FRICTION, OPENING, JAW)
+    for g, grasp in enumerate(grasps):
+        alone = evaluate_draws(grasp, draws, 0.004, FRICTION, OPENING, JAW)
+        np.testing.assert_array_equal(together.closure[g], alone.closure[0])
+        np.testing.assert_array_equal(together.reason[g], alone.reason[0])
+
+
+def test_every_draw_is_a_success_or_exactly_one_failure(rectangle):
+    _, draws = rectangle
+    grasps = [through_centre(25), Grasp((0.0, 0.0), (0.045, 0.0)), Grasp((-0.045, 0.05), (0.045, 0.05)),
+              Grasp((-0.045, 0.012), (0.045, 0.012))]
+    estimates = estimate_p_f(grasps, draws, 0.004, FRICTION, OPENING, JAW)
+    for est in estimates:
+        assert est.p_f * est.samples + sum(est.failures.values()) == pytest.approx(est.samples)
+    assert estimates[1].failures["too_wide"] == 1000  # g1 starts inside the rectangle
+    assert estimates[2].failures["missed"] == 1000  # passes 35 mm above it
+
+
+def test_friction_spread_draws_the_coefficient_around_its_mean(rectangle):
+    """Each draw holds exactly when its friction coefficient, max(0, 0.5 + 0.2 z), exceeds
+    the draw's critical coefficient: the tangent of the larger angle between the contact
+    line and an inward normal (computed here with arccos, independently of the cone
+    test). At 70 degrees the plates meet the long faces 20 degrees tilted, so each
+    touches with its leading edge: the contacts sit on diagonally opposite plate edges
+    and the contact line is about 36 degrees off the normals, so only the draws with
+    friction above tan 36 deg = 0.73 hold (about 12 %)."""
+    _, draws = rectangle
+    grasp = through_centre(70)
+    closure = evaluate_draws(grasp, draws, 0.0, FRICTION, OPENING, JAW, friction_spread=0.2).closure[0]
+    n = len(draws)
+    contacts = find_contacts(draws.shapes, np.tile(grasp.array[0], (n, 1)), np.tile(grasp.array[1], (n, 1)), JAW)
+    line = contacts.c2 - contacts.c1
+    line /= np.linalg.norm(line, axis=1, keepdims=True)
+    angle = np.maximum(np.arccos(-np.einsum("ij,ij->i", contacts.n1, line)),
+                       np.arccos(np.einsum("ij,ij->i", contacts.n2, line)))
+    gamma = np.maximum(0.0, FRICTION + 0.2 * draws.friction)
+    clear = np.abs(gamma - np.tan(angle)) > 1e-9
+    np.testing.assert_array_equal(closure[clear], (gamma > np.tan(angle))[clear])
+    assert clear.sum() == n and 0.01 < closure.mean() < 0.3
+
+
+def test_pairs_wider_than_the_opening_are_narrowed_about_their_midpoint():
+    g1 = np.array([[-0.06, 0.0], [-0.03, 0.0]])
+    g2 = np.array([[0.06, 0.01], [0.03, 0.0]])
+    a, b = _within_opening(g1, g2, 0.1)
+    np.testing.assert_allclose(np.linalg.norm(b - a, axis=1), [0.1, 0.06], atol=1e-15)
+    np.testing.assert_allclose((a + b) / 2, (g1 + g2) / 2, atol=1e-15)
+
+
+# -- the Wilson interval ------------------------------------------------------------------
+
+
+def test_wilson_interval_matches_its_formula():
+    lo, hi = wilson_interval(0, 10)
+    assert lo == 0.0 and hi == pytest.approx(0.27753279986, abs=1e-10)
+    k = np.arange(0, 1001)
+    lo, hi = wilson_interval(k, 1000)
+    assert np.all((lo <= k / 1000) & (k / 1000 <= hi)) and hi[-1] == 1.0 and lo[0] == 0.0
+    # p = 0.3, z^2 = 3.8415: centre 0.307398, half-width 0.088452 (by hand, to 6 digits).
+    lo, hi = wilson_interval(30, 100)
+    assert (lo, hi) == pytest.approx((0.218946, 0.395850), abs=1e-5)  # hand rounding
+
+
+@pytest.mark.parametrize("p", [0.05, 0.3, 0.5, 0.8])
+def test_wilson_interval_covers_at_its_nominal_rate(p):
+    """Exact coverage over the binomial distribution (n = 100) is within 2.5 points of 95 %
+    (the Wilson interval's known oscillation), and so is a simulated check of 4000
+    intervals (Monte-Carlo sd 0.35 points)."""
+    n = 100
+    k = np.arange(n + 1)
+    lo, hi = wilson_interval(k, n)
+    exact = binom.pmf(k, n, p)[(lo <= p) & (p <= hi)].sum()
+    assert abs(exact - 0.95) < 0.025
+    sims = np.random.default_rng(int(p * 100)).binomial(n, p, 4000)
+    lo, hi = wilson_interval(sims, n)
+    assert abs(np.mean((lo <= p) & (p <= hi)) - 0.95) < 0.025
+
+
+def test_p_f_intervals_cover_the_pooled_value_at_their_nominal_rate():
+    """Simulation of the statistic: 10 000 paired draws for a near-corner grasp give its
+    P_F to +-0.005; 100 disjoint estimates of 100 draws each must cover it about 95 % of
+    the time (binomial sd 2.2 points, so at least 88 %)."""
+    scene = load_scene("rectangle")
+    belief = build_belief(scene, stream(1, "rectangle", 0, "sensor"))
+    grasp = Grasp((-0.045, 0.0125), (0.045, 0.0125))
+    outcomes = []
+    for block in range(5):
+        draws = draw_evaluation(belief, 2000, *default_streams(1, "rectangle", block))
+        outcomes.append(evaluate_draws(grasp, draws, 0.004, FRICTION, OPENING, JAW).closure[0])
+    outcomes = np.concatenate(outcomes)
+    pooled = outcomes.mean()
+    assert 0.2 < pooled < 0.9
+    k = outcomes.reshape(100, 100).sum(axis=1)
+    lo, hi = wilson_interval(k, 100)
+    assert np.mean((lo <= pooled) & (pooled <= hi)) >= 0.88
