@@ -43,26 +43,23 @@ class Belief:
         return self.scene.grid
 
     @cached_property
-    def _moments(self) -> tuple[np.ndarray, np.ndarray]:
-        mean, var = self.gp.predict(self.grid.points)
-        m = self.grid.size
-        return mean.reshape(m, m), var.reshape(m, m)
+    def _fields(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return self.gp.grid_fields(self.grid.coords, self.grid.coords)
 
     @property
     def mean(self) -> np.ndarray:
         """Posterior mean SDF on the grid, (M, M)."""
-        return self._moments[0]
+        return self._fields[0]
 
     @property
     def var(self) -> np.ndarray:
         """Posterior variance of the SDF on the grid, (M, M), in m^2."""
-        return self._moments[1]
+        return self._fields[1]
 
-    @cached_property
+    @property
     def gradient(self) -> np.ndarray:
         """Gradient of the posterior mean on the grid, (M, M, 2)."""
-        m = self.grid.size
-        return self.gp.predict_gradient(self.grid.points).reshape(m, m, 2)
+        return self._fields[2]
 
     @cached_property
     def mean_shape(self):

@@ -285,21 +285,33 @@ def _march(fields: SDFBatch, fidx, starts, d, ts) -> np.ndarray:
     """Bilinear field values (B, K, T) along the lines starts[b, k] + ts * d[b]; outside
     the grid's nodes the object is taken to be absent (a large positive value)."""
     grid, m = fields.grid, fields.grid.size
-    scale = np.float32(1.0 / grid.cell)
     t32 = ts.astype(np.float32)[None, None, :]
-    ux = ((starts[..., 0] - grid.coords[0]) * scale).astype(np.float32)[..., None] + t32 * (d[:, 0] * scale).astype(np.float32)[:, None, None]
-    uy = ((starts[..., 1] - grid.coords[0]) * scale).astype(np.float32)[..., None] + t32 * (d[:, 1] * scale).astype(np.float32)[:, None, None]
+
+    def grid_units(axis):  # positions along one axis, in cells from the first node
+        u = np.repeat(((starts[..., axis] - grid.coords[0]) / grid.cell).astype(np.float32)[..., None],
+                      len(ts), axis=2)
+        u += t32 * (d[:, axis] / grid.cell).astype(np.float32)[:, None, None]
+        return u
+
+    ux, uy = grid_units(0), grid_units(1)
     inside = (ux >= 0) & (ux <= m - 1) & (uy >= 0) & (uy <= m - 1)
-    ix = np.clip(ux.astype(np.int32), 0, m - 2)
-    iy = np.clip(uy.astype(np.int32), 0, m - 2)
-    s, r = ux - ix, uy - iy
-    i00 = (fidx.astype(np.int64) * (m * m))[:, None, None] + iy * m + ix
+    ix = np.clip(ux.astype(np.intp), 0, m - 2)
+    iy = np.clip(uy.astype(np.intp), 0, m - 2)
+    ux -= ix  # now the local coordinates within the cell
+    uy -= iy
+    i00 = iy * m
+    i00 += ix
+    i00 += (fidx * (m * m))[:, None, None]
     flat = fields.values.reshape(-1)
     lower = flat.take(i00)
-    lower += s * (flat.take(i00 + 1) - lower)
-    upper = flat.take(i00 + m)
-    upper += s * (flat.take(i00 + m + 1) - upper)
-    return np.where(inside, lower + r * (upper - lower), np.float32(1.0))
+    lower += ux * (flat.take(i00 + 1) - lower)
+    i00 += m
+    upper = flat.take(i00)
+    upper += ux * (flat.take(i00 + 1) - upper)
+    upper -= lower
+    upper *= uy
+    upper += lower
+    return np.where(inside, upper, np.float32(1.0))
 
 
 def _hermite(fields: SDFBatch, fidx, points):
@@ -313,30 +325,27 @@ def _hermite(fields: SDFBatch, fidx, points):
     fx = fields.gx.reshape(-1).take(corners) * h
     fy = fields.gy.reshape(-1).take(corners) * h
     fxy = fields.twist.reshape(-1).take(corners) * (h * h)
-    hs, gs, dhs, dgs = _hermite_basis(s)
-    hr, gr, dhr, dgr = _hermite_basis(r)
-    # Sum over the x corners first, then over the y corners.
-    along = (hs * f + gs * fx).sum(axis=1)
-    along_y = (hs * fy + gs * fxy).sum(axis=1)
-    slope = (dhs * f + dgs * fx).sum(axis=1)
-    slope_y = (dhs * fy + dgs * fxy).sum(axis=1)
-    value = (hr * along + gr * along_y).sum(axis=0)
-    dx = (hr * slope + gr * slope_y).sum(axis=0)
-    dy = (dhr * along + dgr * along_y).sum(axis=0)
+    (h0s, h1s), (g0s, g1s), (dh0s, dh1s), (dg0s, dg1s) = _hermite_basis(s)
+    (h0r, h1r), (g0r, g1r), (dh0r, dh1r), (dg0r, dg1r) = _hermite_basis(r)
+    # Along x within each of the two rows b, then along y.
+    along = h0s * f[:, 0] + h1s * f[:, 1] + g0s * fx[:, 0] + g1s * fx[:, 1]
+    along_y = h0s * fy[:, 0] + h1s * fy[:, 1] + g0s * fxy[:, 0] + g1s * fxy[:, 1]
+    slope = dh0s * f[:, 0] + dh1s * f[:, 1] + dg0s * fx[:, 0] + dg1s * fx[:, 1]
+    slope_y = dh0s * fy[:, 0] + dh1s * fy[:, 1] + dg0s * fxy[:, 0] + dg1s * fxy[:, 1]
+    value = h0r * along[0] + h1r * along[1] + g0r * along_y[0] + g1r * along_y[1]
+    dx = h0r * slope[0] + h1r * slope[1] + g0r * slope_y[0] + g1r * slope_y[1]
+    dy = dh0r * along[0] + dh1r * along[1] + dg0r * along_y[0] + dg1r * along_y[1]
     return value, np.column_stack([dx, dy]) / h
 
 
 def _hermite_basis(t):
-    """Cubic Hermite basis on [0, 1], each as (2, B) for the two ends: value weights H,
-    slope weights G and their derivatives dH, dG."""
+    """Cubic Hermite basis on [0, 1] for the two ends: value weights (H0, H1), slope
+    weights (G0, G1) and their derivatives."""
     t2 = t * t
     t3 = t2 * t
     h1 = 3 * t2 - 2 * t3
-    g0 = t - 2 * t2 + t3
-    g1 = t3 - t2
     d1 = 6 * (t - t2)
-    return (np.stack([1 - h1, h1]), np.stack([g0, g1]),
-            np.stack([-d1, d1]), np.stack([1 - 4 * t + 3 * t2, 3 * t2 - 2 * t]))
+    return (1 - h1, h1), (t - 2 * t2 + t3, t3 - t2), (-d1, d1), (1 - 4 * t + 3 * t2, 3 * t2 - 2 * t)
 
 
 def force_closure(c1, c2, n1, n2, friction) -> np.ndarray:

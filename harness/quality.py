@@ -123,9 +123,11 @@ def evaluate_draws(grasps, draws: EvaluationDraws, sigma_g: float, friction: flo
     ok = contacts.status == OK
     closure = np.zeros(g * n, dtype=bool)
     quality = np.zeros(g * n)
-    args = (contacts.c1[ok], contacts.c2[ok], contacts.n1[ok], contacts.n2[ok], gamma[ok])
-    closure[ok] = force_closure(*args)
-    quality[ok] = ferrari_canny(*args, draws.shapes.center_of_mass[field[ok]], draws.torque_scale)
+    closure[ok] = force_closure(contacts.c1[ok], contacts.c2[ok], contacts.n1[ok], contacts.n2[ok], gamma[ok])
+    # Ferrari-Canny is positive exactly in force closure (tested), so only those draws need it.
+    held = closure
+    quality[held] = ferrari_canny(contacts.c1[held], contacts.c2[held], contacts.n1[held], contacts.n2[held],
+                                  gamma[held], draws.shapes.center_of_mass[field[held]], draws.torque_scale)
     reason = np.full(g * n, -1, dtype=np.int8)
     reason[~ok & (contacts.status == TOO_WIDE)] = FAILURE_REASONS.index("too_wide")
     reason[~ok & (contacts.status == MISSED)] = FAILURE_REASONS.index("missed")

@@ -105,10 +105,15 @@ def test_same_seed_gives_the_same_belief_and_samples():
     assert not np.array_equal(a.observations.values, c.observations.values)
 
 
-def test_grid_fields_agree_with_pointwise_prediction(beliefs):
-    belief = beliefs("rectangle")
-    pts = belief.grid.points[::97]
+@pytest.mark.parametrize("name", ["rectangle", "squirt_bottle"])
+def test_grid_fields_agree_with_pointwise_prediction(beliefs, name):
+    """The grid fields come from the separable weight-space posterior, which equals the
+    function-space one up to the basis cut-off (1e-8 of the prior variance): measured
+    within 6e-7 sqrt(scale) for the mean and 5e-8 scale for the variance."""
+    belief = beliefs(name)
+    c = belief.gp.scale_
+    pts = belief.grid.points[::37]
     mean, var = belief.gp.predict(pts)
-    np.testing.assert_allclose(belief.mean.ravel()[::97], mean, rtol=0, atol=1e-12)
-    np.testing.assert_allclose(belief.var.ravel()[::97], var, rtol=0, atol=1e-15)
-    np.testing.assert_allclose(belief.gradient.reshape(-1, 2)[::97], belief.gp.predict_gradient(pts), atol=1e-12)
+    np.testing.assert_allclose(belief.mean.ravel()[::37], mean, rtol=0, atol=2e-6 * np.sqrt(c))
+    np.testing.assert_allclose(belief.var.ravel()[::37], var, rtol=0, atol=2e-7 * c)
+    np.testing.assert_allclose(belief.gradient.reshape(-1, 2)[::37], belief.gp.predict_gradient(pts), atol=1e-6)

@@ -279,7 +279,7 @@ def test_single_precision_part_of_the_weight_space_sampler_is_accurate(grid_prob
     gp, xs, mean, cov = grid_problem
     bx = gp._basis(0, xs)
     list(gp._weight_space_draws(bx, bx, 1, np.random.default_rng(0)))
-    _, R32 = gp._weight_space(bx, bx)
+    R32 = gp._weight_space(bx, bx).factor32
     F = gp._observation_features(bx, bx)
     noise = gp.noise_ + 1e-10 * gp._prior_diag()
     Fw = F * (np.sqrt(gp.scale_) / np.sqrt(noise))[:, None]
