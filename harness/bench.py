@@ -120,7 +120,7 @@ def sampling(sizes=SAMPLING_SIZES, exact_max_mb: float = 2500.0, scene: str = SA
 
 #: Grid sizes of the P_F timing.
 PLANNING_SIZES = (25, 50, 100, 200)
-PF_REPEATS = 7
+PF_REPEATS = 15
 
 
 def _p_f_row(scene_name: str, size: int) -> dict:
