@@ -23,21 +23,27 @@ class _Parser(argparse.ArgumentParser):
         raise InputError(f"command line{': ' + command if command else ''}", None, message)
 
 
-def _seed(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"seed must be a non-negative integer, got {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"seed must be a non-negative integer, got {value}")
-    return value
+def _checked(convert, accept, expected: str):
+    """An argparse type: convert the text, then require ``accept(value)``."""
+
+    def parse(text: str):
+        try:
+            value = convert(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {expected}, got {text!r}") from None
+        if not accept(value):
+            raise argparse.ArgumentTypeError(f"expected {expected}, got {text}")
+        return value
+
+    return parse
 
 
-def _sizes(text: str) -> list[int]:
-    try:
-        return [int(v) for v in text.split(",")]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected comma-separated integers like 25,40,55, got {text!r}") from None
+_seed = _checked(int, lambda v: v >= 0, "a non-negative integer seed")
+_positive_int = _checked(int, lambda v: 1 <= v <= 1_000_000, "an integer from 1 to 1000000")
+_non_negative = _checked(float, lambda v: math.isfinite(v) and v >= 0, "a finite number >= 0")
+_coordinate = _checked(float, math.isfinite, "a finite coordinate in metres")
+_sizes = _checked(lambda t: [int(v) for v in t.split(",")], lambda v: len(v) > 0,
+                  "comma-separated integers like 25,40,55")
 
 
 def _scenes_list(args) -> int:
@@ -97,36 +103,6 @@ def _scenes_render(args) -> int:
     for name in names:
         print(_render(name, args.seed, Path(args.out) / f"{name}.png"), flush=True)
     return 0
-
-
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if not 1 <= value <= 1_000_000:
-        raise argparse.ArgumentTypeError(f"must be between 1 and 1000000, got {value}")
-    return value
-
-
-def _non_negative(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not (math.isfinite(value) and value >= 0):
-        raise argparse.ArgumentTypeError(f"must be a finite number >= 0, got {text}")
-    return value
-
-
-def _coordinate(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a coordinate in metres, got {text!r}") from None
-    if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f"coordinates must be finite, got {text}")
-    return value
 
 
 def _quality(args) -> int:

@@ -151,11 +151,11 @@ def find_contacts(fields: SDFBatch, g1, g2, jaw_width: float, field_index=None,
 
     Grasp b is evaluated on field ``field_index[b]`` (default: field b when there are B
     fields, else field 0). Each jaw is a plate of width ``jaw_width`` across the line of
-    action; ``plate_lines`` parallel lines across it are marched from g1 to g2 at half a
-    cell with bilinear interpolation. Jaw 1's contact is the first outside-to-inside
-    crossing from g1 over all lines, jaw 2's the first from g2 (the same lines, marched
-    once). Each crossing is then refined by Newton steps on the bicubic interpolant, and
-    the normal is that interpolant's normalised gradient.
+    action; ``plate_lines`` parallel lines across it are marched from g1 to g2 in steps
+    of MARCH_STEP_CELLS with bilinear interpolation. Jaw 1's contact is the first
+    outside-to-inside crossing from g1 over all lines, jaw 2's the first from g2 (the
+    same lines, marched once). Crossings are refined by Newton steps on the bicubic
+    interpolant, and the normal is that interpolant's normalised gradient.
     """
     g1 = np.atleast_2d(np.asarray(g1, dtype=float))
     g2 = np.atleast_2d(np.asarray(g2, dtype=float))
@@ -270,15 +270,14 @@ def _refine(fields, fidx, start, d, t, dt):
 
 
 def _cell_coordinates(grid: Grid, points: np.ndarray):
-    """Lower-left grid node (ix, iy) of the interpolation cell holding each point, the
-    local coordinates (s, r) in it, and whether the point is within the grid's nodes."""
+    """Lower-left grid node (ix, iy) of the interpolation cell holding each point (the
+    border cell for points beyond the nodes) and the local coordinates (s, r) in it."""
     m = grid.size
     ux = (points[..., 0] - grid.coords[0]) / grid.cell
     uy = (points[..., 1] - grid.coords[0]) / grid.cell
-    inside = (ux >= 0.0) & (ux <= m - 1) & (uy >= 0.0) & (uy <= m - 1)
-    ix = np.clip(ux.astype(np.int64), 0, m - 2)
-    iy = np.clip(uy.astype(np.int64), 0, m - 2)
-    return ix, iy, ux - ix, uy - iy, inside
+    ix = np.clip(np.floor(ux).astype(np.int64), 0, m - 2)
+    iy = np.clip(np.floor(uy).astype(np.int64), 0, m - 2)
+    return ix, iy, ux - ix, uy - iy
 
 
 def _march(fields: SDFBatch, fidx, starts, d, ts) -> np.ndarray:
@@ -317,7 +316,7 @@ def _march(fields: SDFBatch, fidx, starts, d, ts) -> np.ndarray:
 def _hermite(fields: SDFBatch, fidx, points):
     """Bicubic Hermite value (B,) and gradient (B, 2) at points (B, 2)."""
     m, h = fields.grid.size, fields.grid.cell
-    ix, iy, s, r, _ = _cell_coordinates(fields.grid, points)
+    ix, iy, s, r = _cell_coordinates(fields.grid, points)
     i00 = fidx * (m * m) + iy * m + ix
     # Corner data as (b, a, B): a indexes x (ix, ix + 1), b indexes y (iy, iy + 1).
     corners = (i00 + np.array([0, 1, m, m + 1])[:, None]).reshape(2, 2, -1)
