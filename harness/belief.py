@@ -43,7 +43,7 @@ class Belief:
         return self.scene.grid
 
     @cached_property
-    def _fields(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _fields(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         return self.gp.grid_fields(self.grid.coords, self.grid.coords)
 
     @property
@@ -60,6 +60,11 @@ class Belief:
     def gradient(self) -> np.ndarray:
         """Gradient of the posterior mean on the grid, (M, M, 2)."""
         return self._fields[2]
+
+    @property
+    def gradient_var(self) -> np.ndarray:
+        """Posterior variance of each component of the SDF's gradient on the grid, (M, M, 2)."""
+        return self._fields[3]
 
     @cached_property
     def mean_shape(self):
@@ -85,6 +90,12 @@ class Belief:
             return 0.5 * self.scene.gripper.opening
         outline = np.asarray(shape.exterior.coords)
         return float(np.linalg.norm(outline - self.center_of_mass, axis=1).max())
+
+    def prepare(self) -> "Belief":
+        """Compute the grid fields, the mean shape and its centre of mass now (they are
+        otherwise computed on first use), so that planning times exclude them."""
+        self.gradient_var, self.characteristic_length  # noqa: B018
+        return self
 
     def sample(self, n: int, rng: np.random.Generator, method: str = "fast") -> ShapeSamples:
         """``n`` posterior shapes on the grid (values and gradients); see GPIS.sample_grid."""

@@ -13,10 +13,6 @@ import numpy as np
 SAMPLING_SIZES = (25, 40, 55, 70, 100, 200)
 #: Scene whose physical size, sensor and GPIS settings are kept while M varies.
 SAMPLING_SCENE = "disk"
-#: Physical quantities held fixed in metres while M varies (the disk's values at M = 40);
-#: numerical ones given in cells (the active band) follow the grid.
-SAMPLING_PHYSICAL = {"grid": {"truncation": "15 mm"}, "gpis": {"lengthscale": "13.5 mm", "scale": "100 mm^2",
-                                                             "prior_mean": "-5 mm"}}
 SAMPLES = 1000
 REPEATS = 3
 
@@ -94,8 +90,22 @@ def _active_set_effect(scene_name: str) -> dict:
     }
 
 
-def _sampling_overrides(size: int) -> dict:
-    return {"grid": {"size": size, **SAMPLING_PHYSICAL["grid"]}, "gpis": SAMPLING_PHYSICAL["gpis"]}
+def _sampling_overrides(size: int, scene_name: str = SAMPLING_SCENE) -> dict:
+    """Overrides that put a scene on an M x M grid while its physical quantities (SDF
+    truncation, sensor noise and bands, GPIS hyperparameters) keep their values in metres
+    at the scene's own grid; numerical settings given in cells (the active band) follow
+    the grid. Sensor regions' parameters are not held (none of the benchmark scenes'
+    regions has any given in cells)."""
+    from harness.scene import load_scene
+
+    native = load_scene(scene_name)
+    sensor, gpis = native.sensor, native.gpis
+    metres = lambda v: f"{v!r} m"  # noqa: E731
+    return {"grid": {"size": size, "truncation": metres(native.truncation)},
+            "sensor": {"noise": metres(sensor.noise), "surface_band": metres(sensor.surface_band),
+                       "interior_depth": metres(sensor.interior_depth)},
+            "gpis": {"lengthscale": metres(gpis.lengthscale), "scale": f"{gpis.scale!r} m^2",
+                     "prior_mean": metres(gpis.prior_mean)}}
 
 
 def sampling(sizes=SAMPLING_SIZES, exact_max_mb: float = 2500.0, scene: str = SAMPLING_SCENE) -> dict:
@@ -150,19 +160,117 @@ def _p_f_row(scene_name: str, size: int) -> dict:
     return {"M": size, "p_f_s": best, "draws_s": draws_s, "p_f": estimate.p_f, "peak_mb": _peak_mb()}
 
 
+def _planner_row(scene_name: str, size: int) -> dict:
+    """Seconds per SCP initialisation of gp-gpis-opt and per candidate of gp-p (1000
+    draws), belief already built (its grid fields too), each the best of 3 plans."""
+    from harness.belief import build_belief
+    from harness.scene import load_scene
+    from harness.seeding import stream
+    from planners.base import Problem
+    from planners.registry import make_planner
+
+    scene = load_scene(scene_name, overrides=_sampling_overrides(size, scene_name))
+    belief = build_belief(scene, stream(0, "bench", size, "sensor")).prepare()
+    problem = Problem.for_belief(belief)
+    out = {"M": size}
+    for name, per in (("gp-gpis-opt", "initialisations"), ("gp-p", "candidates")):
+        planner = make_planner(name)
+        best = math.inf
+        for r in range(3):
+            t0 = time.perf_counter()
+            planner.plan(problem, stream(0, "bench", size, name, r))
+            best = min(best, time.perf_counter() - t0)
+        out[name] = best / getattr(planner, per)
+    return out
+
+
 def planning(sizes=PLANNING_SIZES, scene: str = SAMPLING_SCENE) -> dict:
-    """Seconds per P_F estimate (1000 paired draws) over grid sizes, and its growth."""
+    """Seconds per P_F estimate (1000 paired draws), per SCP initialisation and per GP-P
+    candidate over grid sizes, with their growth."""
     from harness.scene import load_scene
 
     for m in sizes:
         load_scene(scene, overrides=_sampling_overrides(m))
+        load_scene(PLANNER_SCENE, overrides=_sampling_overrides(m, PLANNER_SCENE))
     rows = [_in_fresh_process(_p_f_row, scene, m) for m in sizes]
+    planners = [_in_fresh_process(_planner_row, PLANNER_SCENE, m) for m in sizes]
+    convergence = [_in_fresh_process(_convergence, seed) for seed in range(CONVERGENCE_SEEDS)]
     ms = np.array([r["M"] for r in rows], dtype=float)
-    times = np.array([r["p_f_s"] for r in rows])
-    exponent = float(np.polyfit(np.log(ms), np.log(times), 1)[0]) if len(rows) > 1 else None
+
+    def growth(values):
+        return float(np.polyfit(np.log(ms), np.log(values), 1)[0]) if len(rows) > 1 else None
+
     at50 = next((r["p_f_s"] for r in rows if r["M"] == 50), None)
+    scp = {str(r["M"]): r["gp-gpis-opt"] for r in planners}
+    gpp = {str(r["M"]): r["gp-p"] for r in planners}
     return {"scene": scene, "draws": SAMPLES, "grasp": "through the centre at 0.3 rad, width 0.09 m",
-            "rows": rows, "p_f_s_at_50": at50, "p_f_growth_exponent": exponent}
+            "rows": rows, "p_f_s_at_50": at50, "p_f_growth_exponent": growth([r["p_f_s"] for r in rows]),
+            "planner_scene": PLANNER_SCENE, "scp_s_per_init": scp, "gpp_s_per_candidate": gpp,
+            "scp_over_gpp": {m: scp[m] / gpp[m] for m in scp},
+            "scp_growth_exponent": growth(list(scp.values())), **_convergence_summary(convergence)}
+
+
+#: Scene of the planner timings (tilted, partly hidden: the optimiser has work to do).
+PLANNER_SCENE = "marker"
+#: The supplement's Fig. 1 object, at its own grid.
+CONVERGENCE_SCENE = "plane"
+CONVERGENCE_SEEDS = 3
+CONVERGENCE_INITS = (1, 2, 3, 5, 10)
+
+
+def _convergence(seed: int) -> dict:
+    """The supplement's Fig. 1 on the toy plane (sigma_g = 1.5 cells, friction 0.4): the
+    analytic P_F (1000 evaluation draws) of the best grasp so far against candidates for
+    gp-p (its 100 candidates, in chunks of 10) and against initialisations for
+    gp-gpis-opt (separate runs with 1, 2, 3, 5, 10), with the seconds each took."""
+    from harness.belief import build_belief
+    from harness.quality import default_streams, draw_evaluation, estimate_p_f
+    from harness.scene import load_scene
+    from harness.seeding import stream
+    from planners.base import Problem
+    from planners.gp_gpis_opt import GPGPISOpt
+    from planners.gp_p import GPP
+
+    scene = load_scene(CONVERGENCE_SCENE)
+    sigma_g, friction = 1.5 * scene.grid.cell, 0.4
+    belief = build_belief(scene, stream(seed, "convergence", "sensor")).prepare()
+    problem = Problem.for_belief(belief, sigma_g=sigma_g, friction=friction)
+    evaluation = draw_evaluation(belief, SAMPLES, *default_streams(seed, "convergence-evaluation"))
+
+    def p_f(grasps):
+        return [e.p_f for e in estimate_p_f(grasps, evaluation, sigma_g, friction, problem.opening,
+                                            problem.jaw_width)]
+
+    record: list = []
+    GPP().plan(problem, stream(seed, "convergence", "gp-p"), record=record)
+    best_value, best_grasp, gpp = -np.inf, None, []
+    for seconds, grasps, values in record:
+        k = int(np.argmax(values))
+        if values[k] > best_value:
+            best_value, best_grasp = values[k], grasps[k]
+        gpp.append((seconds, sum(len(r[1]) for r in record[: len(gpp) + 1]), p_f(best_grasp[None])[0]))
+    opt = []
+    for inits in CONVERGENCE_INITS:
+        t0 = time.perf_counter()
+        plan = GPGPISOpt(initialisations=inits).plan(problem, stream(seed, "convergence", "gp-gpis-opt", inits))
+        opt.append((time.perf_counter() - t0, inits, p_f(plan.grasp)[0]))
+    return {"seed": seed, "gp-p": gpp, "gp-gpis-opt": opt}
+
+
+def _convergence_summary(runs: list) -> dict:
+    """Per seed, the seconds each planner needs to reach 95 % of gp-p's best-of-100 (its
+    final P_F): gp-p from its chunks, gp-gpis-opt from the smallest number of
+    initialisations that reaches it. The speed-up is the ratio of the mean times."""
+    t_gpp, t_opt = [], []
+    for run in runs:
+        target = 0.95 * run["gp-p"][-1][2]
+        t_gpp.append(next(t for t, _, p in run["gp-p"] if p >= target))
+        t_opt.append(next((t for t, _, p in run["gp-gpis-opt"] if p >= target), np.nan))
+    final = {"gp-p": float(np.mean([r["gp-p"][-1][2] for r in runs])),
+             "gp-gpis-opt": float(np.mean([r["gp-gpis-opt"][-1][2] for r in runs]))}
+    return {"convergence": runs, "seconds_to_95pct": {"gp-p": t_gpp, "gp-gpis-opt": t_opt},
+            "speedup_to_95pct": float(np.mean(t_gpp) / np.mean(t_opt)) if np.all(np.isfinite(t_opt)) else None,
+            "final_p_f": final}
 
 
 def run(which: str = "all", exact_max_mb: float = 2500.0, sizes=None) -> dict:
@@ -192,6 +300,18 @@ def format_results(results: dict) -> str:
                 lines.append(f"P_F estimate at M = 50: {res['p_f_s_at_50'] * 1e3:.2f} ms (the original: 1.1 to 2.5 s)")
             if res["p_f_growth_exponent"] is not None:
                 lines.append(f"P_F growth exponent (log time vs log M): {res['p_f_growth_exponent']:.2f}")
+            lines.append(f"{'M':>5} {'SCP ms/init':>12} {'GP-P ms/cand':>13} {'ratio':>6}")
+            for m, v in res["scp_s_per_init"].items():
+                lines.append(f"{m:>5} {v * 1e3:>12.2f} {res['gpp_s_per_candidate'][m] * 1e3:>13.2f} "
+                             f"{res['scp_over_gpp'][m]:>6.2f}")
+            if res["scp_growth_exponent"] is not None:
+                lines.append(f"SCP growth exponent: {res['scp_growth_exponent']:.2f}")
+            t = res["seconds_to_95pct"]
+            lines.append(f"convergence on the {CONVERGENCE_SCENE} (sigma_g 1.5 cells, friction 0.4), mean of "
+                         f"{len(res['convergence'])} seeds: seconds to 95 % of gp-p's best-of-100: gp-p "
+                         f"{np.mean(t['gp-p']):.3f}, gp-gpis-opt {np.nanmean(t['gp-gpis-opt']):.3f}; speed-up "
+                         f"{res['speedup_to_95pct'] if res['speedup_to_95pct'] is None else round(res['speedup_to_95pct'], 1)}")
+            lines.append("final P_F: " + ", ".join(f"{k} {v:.3f}" for k, v in res["final_p_f"].items()))
         if name == "sampling":
             lines.append(f"sampling: {res['samples']} grid samples (values + gradients), scene '{res['scene']}'")
             lines.append(f"{'M':>5} {'fit s':>8} {'fast s':>8} {'exact s':>9} {'peak MB':>9} {'D':>6} {'r':>4}  method")

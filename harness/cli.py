@@ -117,8 +117,7 @@ def _quality(args) -> int:
     problem = grasp.problem(scene.grid, scene.gripper.opening)
     if problem:
         raise InputError("--grasp", None, problem)
-    sigma_g = scene.gripper.sigma_g if args.sigma_g is None else args.sigma_g
-    friction = scene.physics.friction if args.friction is None else args.friction
+    sigma_g, friction = _problem_options(args, scene)
     belief = build_belief(scene, stream(args.seed, scene.name, 0, "sensor"))
     draws = draw_evaluation(belief, args.samples, *default_streams(args.seed, scene.name))
     est = estimate_p_f(grasp, draws, sigma_g, friction, scene.gripper.opening, scene.gripper.jaw_width,
@@ -133,6 +132,77 @@ def _quality(args) -> int:
         print(f"{scene.name}: P_F = {est.p_f:.3f} (95% CI {est.ci_low:.3f} to {est.ci_high:.3f}) over "
               f"{est.samples} draws, sigma_g = {sigma_g:g} m, friction = {friction:g}")
         print(f"failures: {fails}; mean Ferrari-Canny quality {est.ferrari_canny_mean:.4f}")
+    return 0
+
+
+def _planners_list(args) -> int:
+    from planners.registry import available
+
+    found, broken = available()
+    for name in sorted(found):
+        cls = found[name]
+        params = ", ".join(f"{k}={v!r}" for k, v in cls.parameters().items())
+        print(f"{name}: {cls.description}")
+        print(f"    parameters: {params or 'none'}")
+    for name, error in sorted(broken.items()):
+        print(f"{name}: failed to load ({error})", file=sys.stderr)
+    return 0
+
+
+def _key_value(text: str) -> tuple[str, str]:
+    key, sep, value = text.partition("=")
+    if not sep or not key.strip():
+        raise argparse.ArgumentTypeError(f"expected KEY=VALUE, got {text!r}")
+    return key.strip(), value.strip()
+
+
+def _problem_options(args, scene):
+    sigma_g = scene.gripper.sigma_g if args.sigma_g is None else args.sigma_g
+    friction = scene.physics.friction if args.friction is None else args.friction
+    return sigma_g, friction
+
+
+def _plan(args) -> int:
+    import time
+
+    from harness.belief import build_belief
+    from harness.quality import default_streams, draw_evaluation, estimate_p_f
+    from harness.scene import load_scene
+    from harness.seeding import stream
+    from planners.base import Problem
+    from planners.registry import make_planner
+
+    scene = load_scene(args.scene)
+    planner = make_planner(args.planner, dict(args.param or []))  # bad input stops here, before any work
+    sigma_g, friction = _problem_options(args, scene)
+    belief = build_belief(scene, stream(args.seed, scene.name, 0, "sensor"))
+    problem = Problem.for_belief(belief, sigma_g=sigma_g, friction=friction, time_budget_s=args.time_budget)
+    belief.prepare()  # the belief's grid fields are part of the belief, not of the planning time
+    start = time.perf_counter()
+    plan = planner.plan(problem, stream(args.seed, scene.name, 0, "planner", planner.name))
+    plan_time = time.perf_counter() - start
+    out = {"planner": planner.name, "scene": scene.name, "seed": args.seed, "status": plan.status,
+           "grasp": None, "estimate": plan.estimate, "plan_time_s": plan_time, "iterations": plan.iterations,
+           "evaluations": plan.evaluations, "p_f": None, "ci_low": None, "ci_high": None,
+           "sigma_g": sigma_g, "friction": friction, "params": planner.get_params(), "message": plan.message}
+    if plan.grasp is not None:
+        # The same evaluation draws for every planner at this seed (common random numbers).
+        draws = draw_evaluation(belief, 1000, *default_streams(args.seed, scene.name))
+        est = estimate_p_f(plan.grasp, draws, sigma_g, friction, problem.opening, problem.jaw_width)[0]
+        out.update(grasp={"g1": list(plan.grasp.g1), "g2": list(plan.grasp.g2)}, p_f=est.p_f,
+                   ci_low=est.ci_low, ci_high=est.ci_high)
+    if args.json:
+        print(json.dumps(out))
+    else:
+        print(f"{scene.name} / {planner.name}: {plan.status} in {plan_time:.3f} s "
+              f"({plan.iterations} iterations, {plan.evaluations} evaluations)")
+        if plan.grasp is not None:
+            g1, g2 = plan.grasp.g1, plan.grasp.g2
+            print(f"grasp g1 = ({g1[0]:.4f}, {g1[1]:.4f}) m, g2 = ({g2[0]:.4f}, {g2[1]:.4f}) m; "
+                  f"P_F = {out['p_f']:.3f} (95% CI {out['ci_low']:.3f} to {out['ci_high']:.3f}); "
+                  f"planner's estimate {plan.estimate if plan.estimate is None else round(plan.estimate, 3)}")
+        if plan.message:
+            print(plan.message)
     return 0
 
 
@@ -182,6 +252,25 @@ def build_parser() -> argparse.ArgumentParser:
                    help="std of the friction coefficient across draws (default 0)")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     p.set_defaults(func=_quality)
+
+    planners = sub.add_parser("planners", help="the available planners")
+    psub = planners.add_subparsers(dest="planners_command", required=True, parser_class=_Parser)
+    p = psub.add_parser("list", help="name, description and parameters of every planner")
+    p.set_defaults(func=_planners_list)
+
+    p = sub.add_parser("plan", help="plan a grasp on one scene with one planner")
+    p.add_argument("scene", help="library name or path to a scene file")
+    p.add_argument("--planner", required=True, help="planner name (see planners list)")
+    p.add_argument("--param", type=_key_value, action="append", metavar="KEY=VALUE",
+                   help="planner parameter (repeatable)")
+    p.add_argument("--seed", type=_seed, default=0, help="experiment seed (default 0)")
+    p.add_argument("--sigma-g", type=_non_negative, default=None,
+                   help="approach noise std per jaw start, metres (default: the scene's gripper.sigma_g)")
+    p.add_argument("--friction", type=_non_negative, default=None,
+                   help="Coulomb friction coefficient (default: the scene's physics.friction)")
+    p.add_argument("--time-budget", type=_non_negative, default=None, help="seconds the planner may use")
+    p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    p.set_defaults(func=_plan)
 
     bench = sub.add_parser("bench", help="benchmarks, measured as ratios in one run")
     bench.add_argument("which", nargs="?", default="all", choices=["sampling", "planning", "all"])

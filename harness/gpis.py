@@ -202,14 +202,15 @@ class GPIS:
                     var[s, i] = self.scale_ / self.lengthscale_**2 - np.einsum("ij,ij->j", A, A)
         return (grad, np.maximum(var, 0.0)) if return_var else grad
 
-    def grid_fields(self, xs, ys) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Posterior mean (ny, nx), variance (ny, nx) and mean gradient (ny, nx, 2) on the
-        tensor grid ys x xs.
+    def grid_fields(self, xs, ys) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Posterior mean (ny, nx), variance (ny, nx), mean gradient (ny, nx, 2) and the
+        variance of each gradient component (ny, nx, 2) on the tensor grid ys x xs.
 
         From the separable weight-space posterior (the one the fast samplers draw from,
         equal to :meth:`predict` up to the basis cut-off): the mean is Psi mu Phi^T, the
-        variance scale * f^T S f with S the coefficients' covariance, summed row by row in
-        O(M r^4 + M^2 r^2) instead of the O(M^2 D^2) of pointwise prediction. When the
+        variances scale * f^T S f with S the coefficients' covariance and f the basis (or
+        its derivative) at the point, summed row by row in O(M r^4 + M^2 r^2) instead of
+        the O(M^2 D^2) of pointwise prediction. When the
         basis is too large for an r^2 x r^2 matrix (over 64 MB), pointwise prediction.
         """
         xs = np.asarray(xs, dtype=float)
@@ -220,8 +221,9 @@ class GPIS:
                 xx, yy = np.meshgrid(xs, ys)
                 P = np.column_stack([xx.ravel(), yy.ravel()])
                 mean, var = self.predict(P)
-                grad = self.predict_gradient(P)
-                return mean.reshape(len(ys), len(xs)), var.reshape(len(ys), len(xs)), grad.reshape(len(ys), len(xs), 2)
+                grad, grad_var = self.predict_gradient(P, return_var=True)
+                shape = (len(ys), len(xs))
+                return mean.reshape(shape), var.reshape(shape), grad.reshape(shape + (2,)), grad_var.reshape(shape + (2,))
             ws = self._weight_space(bx, by)
             fx, dfx = bx.at(xs)
             fy, dfy = by.at(ys)
@@ -230,12 +232,16 @@ class GPIS:
             grad = np.stack([left @ dfx.T, dfy @ ws.mean @ fx.T], axis=-1)
             inverse = sla.solve_triangular(ws.factor, np.eye(len(ws.factor)), lower=True, check_finite=False)
             cov = (inverse.T @ inverse).reshape(by.rank, bx.rank, by.rank, bx.rank)  # of vec(coef) / sqrt(scale)
-            var = np.empty((len(ys), len(xs)))
+            # f^T S f with f = psi_j (x) phi_i for values, psi_j (x) phi'_i and psi'_j (x) phi_i
+            # for the two gradient components.
+            var = np.empty((3, len(ys), len(xs)))
             for rows in _chunks(len(ys), 8):
-                t = np.tensordot(fy[rows], cov, axes=(1, 0))  # (rows, rx, ry, rx)
-                u = np.einsum("jc,jacd->jad", fy[rows], t)  # (rows, rx, rx)
-                var[rows] = np.einsum("ia,jai->ji", fx, u @ fx.T)
-        return mean, np.maximum(self.scale_ * var, 0.0), grad
+                for k, (left, right) in enumerate(((fy, fx), (fy, dfx), (dfy, fx))):
+                    t = np.tensordot(left[rows], cov, axes=(1, 0))  # (rows, rx, ry, rx)
+                    u = np.einsum("jc,jacd->jad", left[rows], t)  # (rows, rx, rx)
+                    var[k, rows] = np.einsum("ia,jai->ji", right, u @ right.T)
+            var = np.maximum(self.scale_ * var, 0.0)
+        return mean, var[0], grad, np.moveaxis(var[1:], 0, -1)
 
     # -- sampling ----------------------------------------------------------------
 

@@ -29,7 +29,10 @@ class SCPSettings:
     improve_tol: float = 1e-7  # relative: stop when the model promises less than this
     constraint_tol: float = 1e-6
     proximal: float = 1e-6  # weight of |step|^2 / 2, so flat directions do not drift
-    fd_step: float = 1e-6  # central finite differences of the problem functions
+    fd_step: float = 1e-6  # finite differences of the problem functions...
+    fd_central: bool = True  # ...central (2n + 1 rows per problem) or forward (n + 1)
+    qp_tolerance: float = 1e-6  # OSQP's absolute and relative tolerance (then polished)
+    hessian_init: float = 0.0  # the Lagrangian Hessian model before any curvature is seen (x I)
 
 
 @dataclass
@@ -74,19 +77,19 @@ def minimize(fun, x0, lower, upper, n_eq: int, n_ineq: int, settings: SCPSetting
     upper = np.broadcast_to(np.asarray(upper, dtype=float), (p, n))
     x = np.clip(x, lower, upper)
     s = settings
-    qp = _BatchQP(p, n, n_eq, n_ineq, s.proximal)
+    qp = _BatchQP(p, n, n_eq, n_ineq, s.proximal, s.qp_tolerance)
     trust = np.full(p, s.trust_init)
     rho = np.full(p, s.penalty_init)
     rounds = np.zeros(p, dtype=int)
     done = np.zeros(p, dtype=bool)
     status = ["iteration_limit"] * p
     iterations = np.zeros(p, dtype=int)
-    f, h, g = _call(fun, x, n_eq, n_ineq)
-    evaluations = p
+    # Every point is evaluated together with its finite-difference stencil (one call), so
+    # an accepted step arrives with its Jacobians and a rejected one needs none.
+    lin, evaluations = _linearise(fun, x, s, n_eq, n_ineq)
     trace = []
-    hessian = np.zeros((p, n, n))  # damped-BFGS model of the Lagrangian's Hessian
+    hessian = np.repeat(s.hessian_init * np.eye(n)[None], p, axis=0)  # damped-BFGS model of the Lagrangian's Hessian
     first = np.ones(p, dtype=bool)
-    last = step = lam = mu = accept = None
     for _ in range(s.max_iterations):
         active = ~done
         if not active.any():
@@ -96,49 +99,48 @@ def minimize(fun, x0, lower, upper, n_eq: int, n_ineq: int, settings: SCPSetting
                 status[i] = "time_limit"
             break
         iterations[active] += 1
-        grad, jh, jg, used = _jacobians(fun, x, s.fd_step, n_eq, n_ineq)
-        evaluations += used
-        if last is not None:  # curvature from the last accepted step, same multipliers
-            moved = accept & active
-            lag_new = grad + np.einsum("pkn,pk->pn", jh, lam) + np.einsum("pkn,pk->pn", jg, mu)
-            lag_old = last[0] + np.einsum("pkn,pk->pn", last[1], lam) + np.einsum("pkn,pk->pn", last[2], mu)
-            hessian[moved] = _damped_bfgs(hessian[moved], step[moved], (lag_new - lag_old)[moved], first[moved])
-            first[moved] = False
+        f, h, g, grad, jh, jg = lin
         step_lo = np.where(active[:, None], np.maximum(-trust[:, None], lower - x), 0.0)
         step_hi = np.where(active[:, None], np.minimum(trust[:, None], upper - x), 0.0)
         d, lam, mu = qp.solve(hessian, grad, h, jh, g, jg, rho, step_lo, step_hi)
-        trial = np.where(active[:, None], x + d, x)
-        ft, ht, gt = _call(fun, trial, n_eq, n_ineq)
-        evaluations += p
+        trial_lin, used = _linearise(fun, x[active] + d[active], s, n_eq, n_ineq)
+        evaluations += used
+        trial = _scatter(lin, trial_lin, active)
         merit = f + rho * _violation(h, g)
         curvature = np.einsum("pi,pij,pj->p", d, hessian, d) + s.proximal * np.einsum("ij,ij->i", d, d)
         model = (f + np.einsum("ij,ij->i", grad, d) + 0.5 * curvature
                  + rho * _violation(h + np.einsum("pkn,pn->pk", jh, d), g + np.einsum("pkn,pn->pk", jg, d)))
         predicted = merit - model
-        actual = merit - (ft + rho * _violation(ht, gt))
+        actual = merit - (trial[0] + rho * _violation(trial[1], trial[2]))
         accept = active & (predicted > 0) & (actual >= s.accept_ratio * predicted)
         # Second-order correction for rejected steps (against the Maratos effect): move
         # back onto the constraints violated at the trial point, least-norm, and retest.
         retry = active & ~accept & (predicted > 0)
         if retry.any():
-            rows = np.concatenate([jh, jg * (gt > 0)[:, :, None]], axis=1)
-            residual = np.concatenate([ht, np.where(gt > 0, gt, 0.0)], axis=1)
+            rows = np.concatenate([jh, jg * (trial[2] > 0)[:, :, None]], axis=1)
+            residual = np.concatenate([trial[1], np.maximum(trial[2], 0.0)], axis=1)
             correction = -np.einsum("pnk,pk->pn", np.linalg.pinv(rows), residual)
             # The correction may leave the trust region somewhat (to twice its radius).
             corrected = np.clip(d + correction, np.maximum(-2 * trust[:, None], lower - x),
                                 np.minimum(2 * trust[:, None], upper - x))
-            trial2 = np.where(retry[:, None], x + corrected, x)
-            f2, h2, g2 = _call(fun, trial2, n_eq, n_ineq)
-            evaluations += p
-            good = retry & (merit - (f2 + rho * _violation(h2, g2)) >= s.accept_ratio * predicted)
+            second_lin, used = _linearise(fun, x[retry] + corrected[retry], s, n_eq, n_ineq)
+            evaluations += used
+            second = _scatter(lin, second_lin, retry)
+            good = retry & (merit - (second[0] + rho * _violation(second[1], second[2]))
+                            >= s.accept_ratio * predicted)
             d = np.where(good[:, None], corrected, d)
-            trial, ft, ht, gt = (np.where(good[:, None], trial2, trial), np.where(good, f2, ft),
-                                 np.where(good[:, None], h2, ht), np.where(good[:, None], g2, gt))
+            trial = tuple(np.where(good.reshape((-1,) + (1,) * (a.ndim - 1)), b, a) for a, b in zip(trial, second))
             accept = accept | good
-        last, step = (grad, jh, jg), d
-        x[accept], f[accept], h[accept], g[accept] = trial[accept], ft[accept], ht[accept], gt[accept]
+        if accept.any():  # curvature along the accepted steps, with the new multipliers
+            lag = lambda lin_: lin_[3] + np.einsum("pkn,pk->pn", lin_[4], lam) + np.einsum("pkn,pk->pn", lin_[5], mu)  # noqa: E731
+            y = lag(trial) - lag(lin)
+            hessian[accept] = _damped_bfgs(hessian[accept], d[accept], y[accept], first[accept])
+            first[accept] = False
+            x[accept] = x[accept] + d[accept]
+            lin = tuple(np.where(accept.reshape((-1,) + (1,) * (a.ndim - 1)), b, a) for a, b in zip(lin, trial))
         trust = np.where(accept, np.minimum(trust * s.trust_grow, s.trust_max),
                          np.where(active, trust * s.trust_shrink, trust))
+        f, h, g = lin[:3]
         stalled = active & ((predicted <= s.improve_tol * (1 + np.abs(merit))) | (trust < s.trust_min))
         feasible = _violation(h, g) <= s.constraint_tol
         for i in np.flatnonzero(stalled & feasible):
@@ -150,7 +152,38 @@ def minimize(fun, x0, lower, upper, n_eq: int, n_ineq: int, settings: SCPSetting
         for i in np.flatnonzero(stalled & ~feasible & ~bump):
             done[i], status[i] = True, "infeasible"
         trace.append((time.perf_counter() - start, evaluations, f.copy(), _violation(h, g), done.copy()))
+    f, h, g = lin[:3]
     return SCPResult(x, f, _violation(h, g), iterations, status, evaluations, trace)
+
+
+def _linearise(fun, x, s: SCPSettings, n_eq, n_ineq):
+    """f, h, g and their finite-difference derivatives (grad, J_h, J_g) at the rows of x,
+    from one call on the rows and their stencils; and the number of rows evaluated."""
+    p, n = x.shape
+    offsets = (np.concatenate([np.eye(n), -np.eye(n)]) if s.fd_central else np.eye(n)) * s.fd_step
+    stencil = np.concatenate([np.zeros((1, n)), offsets])  # the point itself first
+    points = (x[:, None, :] + stencil[None]).reshape(-1, n)
+    f, h, g = _call(fun, points, n_eq, n_ineq)
+    k = len(stencil)
+    f, h, g = f.reshape(p, k), h.reshape(p, k, n_eq), g.reshape(p, k, n_ineq)
+    if s.fd_central:
+        hi, lo, span = slice(1, n + 1), slice(n + 1, 2 * n + 1), 2 * s.fd_step
+        grad = (f[:, hi] - f[:, lo]) / span
+        jh = np.swapaxes((h[:, hi] - h[:, lo]) / span, 1, 2)
+        jg = np.swapaxes((g[:, hi] - g[:, lo]) / span, 1, 2)
+    else:
+        grad = (f[:, 1:] - f[:, :1]) / s.fd_step
+        jh = np.swapaxes((h[:, 1:] - h[:, :1]) / s.fd_step, 1, 2)
+        jg = np.swapaxes((g[:, 1:] - g[:, :1]) / s.fd_step, 1, 2)
+    return (f[:, 0], h[:, 0], g[:, 0], grad, jh, jg), len(points)
+
+
+def _scatter(base, part, rows):
+    """``base`` (a tuple of arrays over all problems) with the given rows replaced by ``part``."""
+    out = tuple(a.copy() for a in base)
+    for a, b in zip(out, part):
+        a[rows] = b
+    return out
 
 
 def _damped_bfgs(b, s, y, first):
@@ -182,19 +215,6 @@ def _call(fun, x, n_eq, n_ineq):
             np.asarray(g, dtype=float).reshape(k, n_ineq))
 
 
-def _jacobians(fun, x, step, n_eq, n_ineq):
-    """Central differences of f, h, g at every row of x, from one call."""
-    p, n = x.shape
-    offsets = np.concatenate([np.eye(n), -np.eye(n)]) * step  # (2n, n)
-    points = (x[:, None, :] + offsets[None]).reshape(-1, n)
-    f, h, g = _call(fun, points, n_eq, n_ineq)
-    f, h, g = f.reshape(p, 2, n), h.reshape(p, 2, n, n_eq), g.reshape(p, 2, n, n_ineq)
-    grad = (f[:, 0] - f[:, 1]) / (2 * step)
-    jh = np.swapaxes((h[:, 0] - h[:, 1]) / (2 * step), 1, 2)  # (p, n_eq, n)
-    jg = np.swapaxes((g[:, 0] - g[:, 1]) / (2 * step), 1, 2)
-    return grad, jh, jg, len(points)
-
-
 class _BatchQP:
     """The block-diagonal QP of all problems, with a fixed sparsity pattern.
 
@@ -203,7 +223,7 @@ class _BatchQP:
     d^T (B + proximal I) d / 2 + grad . d + rho (sum t + sum s).
     """
 
-    def __init__(self, p: int, n: int, n_eq: int, n_ineq: int, proximal: float):
+    def __init__(self, p: int, n: int, n_eq: int, n_ineq: int, proximal: float, tolerance: float):
         self.p, self.n, self.ne, self.ni = p, n, n_eq, n_ineq
         m = n + n_eq + n_ineq
         rows_per = 2 * n_eq + 2 * n_ineq + n
@@ -237,6 +257,7 @@ class _BatchQP:
         self._p_matrix = pm
         self._triu = iu
         self.proximal = proximal
+        self.tolerance = tolerance
         self._solver = None
         self._rows_per = rows_per
 
@@ -263,8 +284,8 @@ class _BatchQP:
             self._a.data = data
             self._p_matrix.data = pdata
             self._solver = osqp.OSQP()
-            self._solver.setup(P=self._p_matrix, q=q, A=self._a, l=lo, u=hi, verbose=False, eps_abs=1e-9,
-                               eps_rel=1e-9, polishing=True, max_iter=20000)
+            self._solver.setup(P=self._p_matrix, q=q, A=self._a, l=lo, u=hi, verbose=False,
+                               eps_abs=self.tolerance, eps_rel=self.tolerance, polishing=True, max_iter=4000)
         else:
             self._solver.update(q=q, l=lo, u=hi, Ax=data, Px=pdata)
         result = self._solver.solve(raise_error=False)

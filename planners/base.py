@@ -1,0 +1,125 @@
+"""The planner contract. A planner is one class in one module: it receives a Problem
+(read-only) and a random generator, and returns a Plan.
+
+Write a planner by subclassing :class:`Planner`:
+
+- set the class attributes ``name`` (the registry key, e.g. ``"my-planner"``) and
+  ``description`` (one line);
+- give ``__init__`` only keyword parameters, each with a default, and store each one
+  under its own name (``self.candidates = candidates``): that is how ``planners list``
+  shows them and how ``--param KEY=VALUE`` sets them;
+- implement ``plan(problem, rng)``: use only ``rng`` for randomness, check
+  ``problem.time_budget_s`` between units of work, and return a Plan whose status says
+  what happened (never raise for a belief without a surface: return
+  ``Plan.without_grasp("no_surface", ...)``).
+
+Register it in your own package under the entry-point group ``gpis_harness.planners``
+(see docs/planners.md) and check it with ``harness.testing.check_planner``.
+"""
+
+from __future__ import annotations
+
+import inspect
+import time
+from dataclasses import dataclass, field
+from typing import ClassVar
+
+import numpy as np
+
+from harness.belief import Belief
+from harness.grasp import Grasp
+
+#: What a Plan's status may say.
+STATUSES = ("ok", "budget", "no_surface", "no_candidate", "infeasible", "error")
+
+
+@dataclass(frozen=True)
+class Problem:
+    """What a planner must solve: the shape belief, the gripper (opening, jaw width),
+    Coulomb friction (and its spread across draws), approach noise sigma_g (metres, per
+    jaw start) and an optional time budget in seconds."""
+
+    belief: Belief
+    opening: float
+    jaw_width: float
+    friction: float
+    sigma_g: float
+    friction_spread: float = 0.0
+    time_budget_s: float | None = None
+
+    @classmethod
+    def for_belief(cls, belief: Belief, sigma_g: float | None = None, friction: float | None = None,
+                   friction_spread: float = 0.0, time_budget_s: float | None = None) -> "Problem":
+        """The problem of a belief with its scene's gripper and friction unless given."""
+        scene = belief.scene
+        return cls(belief, scene.gripper.opening, scene.gripper.jaw_width,
+                   scene.physics.friction if friction is None else friction,
+                   scene.gripper.sigma_g if sigma_g is None else sigma_g, friction_spread, time_budget_s)
+
+
+@dataclass(frozen=True)
+class Plan:
+    """A planner's answer.
+
+    grasp: the chosen grasp, or None. status: one of STATUSES ("ok"; "budget" when the
+    time budget cut the search short and the best grasp so far is returned;
+    "no_surface"; "no_candidate"; "infeasible"; "error", set by the harness when plan
+    raised). estimate: the planner's own estimate of P_F, or None. iterations and
+    evaluations: the planner's units of work. seconds: time by phase. trace: tuples
+    (seconds, evaluations, best value so far) for convergence plots. message: a note.
+    """
+
+    grasp: Grasp | None
+    status: str
+    estimate: float | None = None
+    iterations: int = 0
+    evaluations: int = 0
+    seconds: dict = field(default_factory=dict)
+    trace: tuple = ()
+    message: str = ""
+
+    @classmethod
+    def without_grasp(cls, status: str, message: str, **stats) -> "Plan":
+        return cls(None, status, message=message, **stats)
+
+
+class Planner:
+    """Base class of planners; see the module docstring for the contract."""
+
+    name: ClassVar[str] = ""
+    description: ClassVar[str] = ""
+
+    def plan(self, problem: Problem, rng: np.random.Generator) -> Plan:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    @classmethod
+    def parameters(cls) -> dict:
+        """Keyword parameters of the constructor and their defaults."""
+        sig = inspect.signature(cls.__init__)
+        return {k: p.default for k, p in sig.parameters.items()
+                if k != "self" and p.kind not in (p.VAR_POSITIONAL, p.VAR_KEYWORD)}
+
+    def get_params(self) -> dict:
+        """The parameters this planner was made with."""
+        return {k: getattr(self, k) for k in self.parameters()}
+
+
+class Stopwatch:
+    """Elapsed time against an optional budget, and seconds by phase."""
+
+    def __init__(self, budget: float | None):
+        self.start = time.perf_counter()
+        self.budget = budget
+        self.phases: dict = {}
+        self._mark = self.start
+
+    def elapsed(self) -> float:
+        return time.perf_counter() - self.start
+
+    def over_budget(self) -> bool:
+        return self.budget is not None and self.elapsed() > self.budget
+
+    def lap(self, phase: str) -> None:
+        now = time.perf_counter()
+        self.phases[phase] = self.phases.get(phase, 0.0) + now - self._mark
+        self._mark = now

@@ -1,0 +1,238 @@
+"""GP-GPIS-OPT (Mahler et al., ICRA 2015): a grasp optimised by sequential convex
+programming for a smooth surrogate of P_F on the mean shape under approach noise and
+shape uncertainty, minus a penalty on shape uncertainty at the contacts, subject to
+antipodal constraints.
+
+Decision variables: the two jaw start points (in cells), not the contact points as in the
+paper. With jaw plates a grasp's contacts lie on the plate's edges as often as on its
+axis, so a grasp rebuilt from its contacts is a different grasp (on the toy plane,
+candidates rebuilt that way kept a rank correlation of only 0.65 with their own P_F).
+With jaw starts, the contacts come from the same plate sweep as the evaluation and the
+physics (harness.grasp.find_contacts on the mean): contacts on the mean surface and a
+collision-free approach hold by construction, and there are no equality constraints.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from scipy.special import ndtr
+
+from harness.grasp import OK, SDFBatch, _hermite, find_contacts
+from harness.quality import draw_evaluation, estimate_p_f
+from harness.scp import SCPSettings, minimize
+from planners import candidates as cand
+from planners.base import Plan, Planner, Problem, Stopwatch
+
+#: Sigma points over approach noise: each jaw start offset across the axis by the
+#: 3-point Gauss-Hermite nodes 0, +-sqrt(3) sigma_g (weights 2/3, 1/6, 1/6), 9 in all.
+#: (The original used +-sigma_g with weights 1, e^-1/2, e^-1, which understates the
+#: noise's spread; these nodes integrate a Gaussian exactly up to degree 5.)
+_NODES = np.array([-math.sqrt(3.0), 0.0, math.sqrt(3.0)])
+_NODE_W = np.array([1 / 6, 2 / 3, 1 / 6])
+_K = np.array([(a, b) for a in _NODES for b in _NODES])
+_W = np.array([wa * wb for wa in _NODE_W for wb in _NODE_W])
+#: The sigma point with no offset: the nominal grasp.
+_NOMINAL = int(np.flatnonzero((_K == 0).all(axis=1))[0])
+
+
+class GPGPISOpt(Planner):
+    name = "gp-gpis-opt"
+    description = "sequential convex programming on a smooth P_F surrogate minus an uncertainty penalty (OSQP)"
+
+    def __init__(self, initialisations: int = 10, screen: int = 100, nu: float = 1.0, temperature_deg: float = 5.0,
+                 max_iterations: int = 20, finalists: int = 0, rerank_samples: int = 200,
+                 angular_noise_deg: float = 10.0):
+        if min(initialisations, screen, max_iterations, rerank_samples) < 1 or finalists < 0:
+            raise ValueError("initialisations, screen, max_iterations and rerank_samples must be >= 1, "
+                             "finalists >= 0")
+        if nu < 0 or temperature_deg <= 0:
+            raise ValueError("nu must be >= 0 and temperature_deg > 0")
+        self.initialisations = int(initialisations)
+        self.screen = int(screen)
+        self.nu = float(nu)
+        self.temperature_deg = float(temperature_deg)
+        self.max_iterations = int(max_iterations)
+        self.finalists = int(finalists)
+        self.rerank_samples = int(rerank_samples)
+        self.angular_noise_deg = float(angular_noise_deg)
+
+    def plan(self, problem: Problem, rng: np.random.Generator) -> Plan:
+        clock = Stopwatch(problem.time_budget_s)
+        belief = problem.belief
+        if belief.mean_shape.is_empty:
+            return Plan.without_grasp("no_surface", "the posterior mean has no inside", seconds=clock.phases)
+        init_rng, rerank_rng = rng.spawn(2)
+        grasps = cand.generate(belief, max(self.screen, self.initialisations), init_rng, problem.opening,
+                               problem.jaw_width, problem.sigma_g, math.radians(self.angular_noise_deg))
+        objective = SurrogateObjective(problem, self.nu, math.radians(self.temperature_deg))
+        c = find_contacts(objective.mean, grasps[:, 0], grasps[:, 1], problem.jaw_width) if len(grasps) else None
+        if c is None or not np.any(c.status == OK):
+            return Plan.without_grasp("no_candidate", "no initial grasp meets the mean shape", seconds=clock.phases)
+        ok = c.status == OK
+        starts = grasps[ok]
+        x0 = starts.reshape(-1, 4) / objective.h
+        # Random starts, screened: the surrogate's best of the pool start the SCP.
+        f0, _, g0 = objective(x0)
+        best = np.lexsort((f0, np.maximum(g0, 0).sum(axis=1) > 0.5))[: self.initialisations]
+        x0, starts = x0[best], starts[best]
+        clock.lap("initialisation")
+        budget = None if problem.time_budget_s is None else max(0.0, problem.time_budget_s - clock.elapsed())
+        settings = SCPSettings(trust_init=2.0, trust_min=0.01, trust_max=8.0, max_iterations=self.max_iterations,
+                               penalty_init=1.0, improve_tol=1e-3, constraint_tol=1e-3, fd_step=1e-4,
+                               fd_central=False, qp_tolerance=1e-4)
+        lower, upper = objective.bounds()
+        result = minimize(objective, x0, lower, upper, 0, objective.n_ineq, settings, time_budget=budget)
+        clock.lap("scp")
+
+        feasible = result.violation <= settings.constraint_tol
+        order = np.lexsort((result.objective, ~feasible))  # feasible first, then by objective
+        jaws = objective.jaw_starts(result.x)
+        valid = objective.valid(jaws)
+        order = [i for i in order if valid[i]]
+        chosen, estimate, message = None, None, ""
+        if order and self.finalists > 1:
+            finalists = order[: self.finalists]
+            shapes, approach, friction = rerank_rng.spawn(3)
+            draws = draw_evaluation(belief, self.rerank_samples, shapes, approach, friction)
+            est = estimate_p_f(jaws[finalists], draws, problem.sigma_g, problem.friction, problem.opening,
+                               problem.jaw_width, problem.friction_spread)
+            pick = int(np.argmax([e.p_f for e in est]))
+            chosen, estimate = finalists[pick], est[pick].p_f
+            message = f"finalists re-ranked on {self.rerank_samples} draws"
+            clock.lap("rerank")
+        elif order:
+            chosen = order[0]
+            estimate = float(objective.surrogate(result.x[chosen:chosen + 1])[0])
+        if chosen is None:  # no optimised grasp is executable: fall back to the best start
+            jaws, chosen, message = starts, 0, "no optimised grasp was executable; returning a start"
+        status = "ok" if feasible[chosen] else "infeasible"
+        if any(s == "time_limit" for s in result.status):
+            status = "budget"
+        trace = _trace(result, settings.constraint_tol)
+        g = jaws[chosen]
+        from harness.grasp import Grasp
+
+        return Plan(Grasp(tuple(g[0]), tuple(g[1])), status, estimate, iterations=int(result.iterations.max()),
+                    evaluations=result.evaluations, seconds=clock.phases, trace=trace, message=message)
+
+
+def _trace(result, tol):
+    """(seconds, evaluations, best surrogate objective so far among feasible iterates)."""
+    best, out = np.inf, []
+    for seconds, evaluations, objective, violation, _ in result.trace:
+        feasible = violation <= tol
+        if feasible.any():
+            best = min(best, float(objective[feasible].min()))
+        out.append((seconds, evaluations, best))
+    return tuple(out)
+
+
+class SurrogateObjective:
+    """GP-GPIS-OPT's objective and constraints for the SCP solver, vectorised over rows of
+    x = (g1, g2), the jaw starts in cells.
+
+    Objective: nu * (var(c1) + var(c2)) / scale - P~_F(x), plus a small pull (1e-3 per
+    cell^2) of each jaw start towards one clearance from its contact, which fixes the
+    otherwise free sliding of a jaw along the axis. P~_F approximates P_F under approach
+    noise and shape uncertainty: for each sigma point (jaw starts offset across the axis
+    by the Gauss-Hermite nodes) the contacts are the plates' first crossings of the mean
+    (find_contacts: bicubic, sub-cell), and the grasp holds with probability
+    Phi(m1 / s1) Phi(m2 / s2), where m_i = atan(friction) - (angle between the contact line
+    and contact i's inward normal) and s_i^2 = temperature^2 + (the posterior std of that
+    normal's angle at the nominal contact, from the gradient variance)^2. A sigma point
+    whose plates start inside, miss, or find no normal scores 0.
+    Inequalities: both nominal contacts in their friction cones (radians); the width
+    within the opening; each jaw start at least a clearance minus sigma_g from its
+    contact (cells). Bounds keep the jaw starts in the grid.
+    """
+
+    def __init__(self, problem: Problem, nu: float, temperature: float):
+        belief = problem.belief
+        grid = belief.grid
+        self.problem = problem
+        self.h = grid.cell
+        self.nu = nu
+        self.temperature = temperature
+        self.cone = math.atan(problem.friction)
+        self.gap = cand.clearance(belief, problem.sigma_g)
+        self.mean = SDFBatch(grid, belief.mean, belief.gradient)
+        scale = belief.gp.scale_
+        # Variance of the value and mean variance of the two gradient components, both as
+        # smooth fields on the grid (normalised by the prior's), read at the contacts.
+        var = belief.var / scale
+        grad_var = belief.gradient_var.mean(axis=-1)
+        self.uncertainty = SDFBatch(grid, np.stack([var, grad_var]),
+                                    np.stack([np.stack(np.gradient(a, grid.cell, axis=(1, 0)), -1)
+                                              for a in (var, grad_var)]))
+        self.n_ineq = 2 + 1 + 2
+
+    def bounds(self):
+        limit = (0.5 * self.problem.belief.grid.extent - self.h) / self.h
+        return -limit, limit
+
+    def jaw_starts(self, x):
+        """Jaw starts (R, 2, 2) in metres."""
+        return x.reshape(-1, 2, 2) * self.h
+
+    def valid(self, jaws):
+        half = 0.5 * self.problem.belief.grid.extent
+        width = np.linalg.norm(jaws[:, 1] - jaws[:, 0], axis=1)
+        return (width <= self.problem.opening) & (np.abs(jaws) < half).all(axis=(1, 2)) & np.isfinite(width)
+
+    def _evaluate(self, x):
+        """Contacts of every sigma point: c1, c2, n1, n2 (R, 9, 2) and ok (R, 9)."""
+        jaws = self.jaw_starts(x)
+        g1, g2 = jaws[:, 0], jaws[:, 1]
+        d = g2 - g1
+        perp = np.stack([-d[:, 1], d[:, 0]], axis=1) / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
+        shift = self.problem.sigma_g * _K  # (9, 2): offsets of jaw 1 and jaw 2 across the axis
+        s1 = (g1[:, None, :] + shift[None, :, 0, None] * perp[:, None, :]).reshape(-1, 2)
+        s2 = (g2[:, None, :] + shift[None, :, 1, None] * perp[:, None, :]).reshape(-1, 2)
+        c = find_contacts(self.mean, s1, s2, self.problem.jaw_width, field_index=np.zeros(len(s1), dtype=np.int64))
+        r = len(x)
+        return (c.c1.reshape(r, -1, 2), c.c2.reshape(r, -1, 2), c.n1.reshape(r, -1, 2), c.n2.reshape(r, -1, 2),
+                (c.status == OK).reshape(r, -1))
+
+    def _terms(self, x) -> dict:
+        """The objective's and constraints' parts at rows x (see the class docstring)."""
+        r = len(x)
+        c1, c2, n1, n2, ok = self._evaluate(x)
+        line = c2 - c1
+        line /= np.maximum(np.linalg.norm(line, axis=-1, keepdims=True), 1e-12)
+        a1 = np.arccos(np.clip(-np.einsum("rsk,rsk->rs", n1, line), -1.0, 1.0))
+        a2 = np.arccos(np.clip(np.einsum("rsk,rsk->rs", n2, line), -1.0, 1.0))
+        hit = ok[:, _NOMINAL]
+        contacts = np.concatenate([c1[:, _NOMINAL], c2[:, _NOMINAL]])
+        contacts = np.where(np.concatenate([hit, hit])[:, None], contacts, 0.0)
+        values, _ = _hermite(self.uncertainty, np.repeat([0, 1], 2 * r), np.concatenate([contacts, contacts]))
+        var, grad_var = values[: 2 * r].reshape(2, r), values[2 * r:].reshape(2, r)
+        _, grad = _hermite(self.mean, np.zeros(2 * r, dtype=np.int64), contacts)
+        angle_sd = np.sqrt(np.maximum(grad_var, 0.0)) / np.maximum(np.linalg.norm(grad, axis=1).reshape(2, r), 1e-6)
+        spread = np.sqrt(self.temperature**2 + angle_sd**2)  # (2, R)
+        hold = ndtr((self.cone - a1) / spread[0][:, None]) * ndtr((self.cone - a2) / spread[1][:, None])
+        jaws = self.jaw_starts(x)
+        reach = np.stack([np.linalg.norm(jaws[:, 0] - c1[:, _NOMINAL], axis=1),
+                          np.linalg.norm(jaws[:, 1] - c2[:, _NOMINAL], axis=1)], axis=1)
+        reach = np.where(hit[:, None], reach, self.gap)
+        return {
+            "p_f": np.where(ok, hold, 0.0) @ _W,
+            "uncertainty": self.nu * np.where(hit, var.sum(axis=0), 0.0),
+            "pull": 1e-3 * (((reach - self.gap) / self.h) ** 2).sum(axis=1),
+            # A nominal grasp that finds no contacts violates its cone constraints by a radian.
+            "cone": np.where(hit[:, None], np.stack([a1[:, _NOMINAL], a2[:, _NOMINAL]], axis=1) - self.cone, 1.0),
+            "width": ((np.linalg.norm(jaws[:, 1] - jaws[:, 0], axis=1) - self.problem.opening) / self.h)[:, None],
+            "clear": (self.gap - self.problem.sigma_g - reach) / self.h,
+        }
+
+    def __call__(self, x):
+        """f (R,), h (R, 0), g (R, n_ineq) for the SCP solver."""
+        t = self._terms(x)
+        g = np.concatenate([t["cone"], t["width"], t["clear"]], axis=1)
+        return t["uncertainty"] - t["p_f"] + t["pull"], np.zeros((len(x), 0)), g
+
+    def surrogate(self, x):
+        """P~_F (R,)."""
+        return self._terms(x)["p_f"]

@@ -1,0 +1,167 @@
+"""Planners: the contract and its conformance kit, the registry and plugins, every
+built-in on every library scene, and GP-GPIS-OPT's quality on the rectangle."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+
+from harness.belief import build_belief
+from harness.errors import InputError
+from harness.grasp import Grasp
+from harness.quality import default_streams, draw_evaluation, estimate_p_f
+from harness.scene import library_names, load_scene
+from harness.seeding import stream
+from harness.testing import check_planner
+from planners.base import Plan, Planner, Problem
+from planners.gp_gpis_opt import GPGPISOpt
+from planners.gp_p import GPP
+from planners.mean_shape import MeanShape
+from planners.registry import make_planner
+
+
+@pytest.fixture(scope="module")
+def beliefs():
+    cache = {}
+
+    def get(name):
+        if name not in cache:
+            cache[name] = build_belief(load_scene(name), stream(0, name, 0, "sensor")).prepare()
+        return cache[name]
+
+    return get
+
+
+@pytest.mark.parametrize("cls, params", [(MeanShape, None), (GPP, {"samples": 300, "candidates": 30}),
+                                         (GPGPISOpt, None)])
+def test_built_in_planners_pass_the_conformance_kit(cls, params):
+    check_planner(cls, params=params)
+
+
+class _Outside(Planner):
+    name = "outside"
+    description = "returns a grasp outside the grid"
+
+    def __init__(self, x: float = 1.0):
+        self.x = x
+
+    def plan(self, problem, rng):
+        return Plan(Grasp((self.x, 0.0), (self.x + 0.01, 0.0)), "ok")
+
+
+class _Random(_Outside):
+    name = "random"
+    description = "ignores its generator"
+
+    def plan(self, problem, rng):
+        x = np.random.default_rng().uniform(-0.03, 0.03)
+        return Plan(Grasp((x, -0.04), (x, 0.04)), "ok")
+
+
+class _Fragile(_Outside):
+    name = "fragile"
+    description = "raises on a belief without a surface"
+
+    def plan(self, problem, rng):
+        if problem.belief.mean_shape.is_empty:
+            raise RuntimeError("no surface")
+        return Plan(Grasp((0.0, -0.04), (0.0, 0.04)), "ok")
+
+
+@pytest.mark.parametrize("cls, complaint", [(_Outside, "outside the grid"), (_Random, "different grasps"),
+                                            (_Fragile, "no surface")])
+def test_the_conformance_kit_catches_broken_planners(cls, complaint):
+    with pytest.raises(AssertionError, match=complaint):
+        check_planner(cls, scenes=("disk",), seeds=(0,))
+
+
+@pytest.mark.parametrize("name", library_names())
+def test_every_built_in_planner_returns_a_valid_grasp_on_every_library_scene(beliefs, name):
+    belief = beliefs(name)
+    problem = Problem.for_belief(belief)
+    for planner in (MeanShape(), GPP(), GPGPISOpt()):
+        plan = planner.plan(problem, stream(0, name, planner.name))
+        assert plan.status == "ok", (planner.name, plan.status, plan.message)
+        assert plan.grasp.problem(belief.grid, problem.opening) is None
+
+
+def test_gp_gpis_opt_finds_a_secure_grasp_on_the_rectangle(beliefs):
+    belief = beliefs("rectangle")
+    problem = Problem.for_belief(belief, sigma_g=0.001, friction=0.5)
+    draws = draw_evaluation(belief, 1000, *default_streams(0, "rectangle"))
+    for seed in range(3):
+        plan = GPGPISOpt().plan(problem, stream(seed, "rectangle", "gp-gpis-opt"))
+        est = estimate_p_f(plan.grasp, draws, 0.001, 0.5, problem.opening, problem.jaw_width)[0]
+        assert est.p_f >= 0.95, (seed, est)
+
+
+def test_planners_report_a_trace_and_their_work(beliefs):
+    problem = Problem.for_belief(beliefs("disk"))
+    for planner in (MeanShape(), GPP(samples=200, candidates=20), GPGPISOpt()):
+        plan = planner.plan(problem, stream(1, "disk", planner.name))
+        times = [t[0] for t in plan.trace]
+        assert times == sorted(times) and len(times) > 0
+        assert plan.evaluations > 0 and plan.iterations > 0 and sum(plan.seconds.values()) > 0
+
+
+# -- the registry ----------------------------------------------------------------------------
+
+
+def test_parameters_are_read_as_the_type_of_their_default():
+    planner = make_planner("gp-gpis-opt", {"initialisations": "3", "nu": "0.5"})
+    assert planner.initialisations == 3 and planner.nu == 0.5
+    assert make_planner("gp-p", {"samples": 50}).samples == 50
+
+
+@pytest.mark.parametrize("name, params, field", [("gp-p", {"nope": "1"}, "nope"), ("gp-p", {"samples": "x"}, "samples"),
+                                                 ("gp-p", {"samples": "0"}, None), ("bogus", {}, None)])
+def test_bad_planner_names_and_parameters_are_input_errors(name, params, field):
+    with pytest.raises(InputError) as err:
+        make_planner(name, params)
+    assert err.value.field == field
+
+
+def test_a_plugin_registered_by_entry_point_is_listed(tmp_path):
+    (tmp_path / "toy_planner.py").write_text(textwrap.dedent('''
+        from planners.base import Plan, Planner
+        from harness.grasp import Grasp
+
+        class Toy(Planner):
+            name = "toy"
+            description = "a plugin found through its entry point"
+
+            def __init__(self, width: float = 0.05):
+                self.width = width
+
+            def plan(self, problem, rng):
+                return Plan(Grasp((-self.width / 2, 0.0), (self.width / 2, 0.0)), "ok")
+    '''))
+    info = tmp_path / "toy_planner-0.1.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: toy-planner\nVersion: 0.1\n")
+    (info / "entry_points.txt").write_text("[gpis_harness.planners]\ntoy = toy_planner:Toy\n")
+    env = dict(os.environ, PYTHONPATH=str(tmp_path) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    out = subprocess.run([sys.executable, "-m", "harness", "planners", "list"], capture_output=True, text=True,
+                         env=env, timeout=120, check=True).stdout
+    assert "toy: a plugin found through its entry point" in out and "width=0.05" in out
+    plan = subprocess.run([sys.executable, "-m", "harness", "plan", "disk", "--planner", "toy", "--param",
+                           "width=0.08", "--json"], capture_output=True, text=True, env=env, timeout=300, check=True)
+    result = json.loads(plan.stdout)
+    assert result["planner"] == "toy" and result["grasp"]["g1"] == [-0.04, 0.0]
+
+
+def test_plan_json_has_the_contracted_fields(capsys):
+    from harness.cli import main
+
+    assert main(["plan", "rectangle", "--planner", "mean-shape", "--seed", "2", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert {"planner", "grasp", "estimate", "plan_time_s", "iterations", "evaluations", "status", "p_f",
+            "ci_low", "ci_high"} <= set(out)
+    assert out["status"] == "ok" and out["ci_low"] <= out["p_f"] <= out["ci_high"]
+    assert len(out["grasp"]["g1"]) == 2 and len(out["grasp"]["g2"]) == 2
