@@ -8,7 +8,7 @@ from functools import cached_property
 
 import numpy as np
 
-from harness.geometry import Grid, inside_region, largest_region
+from harness.geometry import Grid, inside_region, largest_region, zero_contours
 from harness.gpis import GPIS, select_active_set
 from harness.scene import Scene
 from harness.sensor import Observations, observe
@@ -90,6 +90,18 @@ class Belief:
             return 0.5 * self.scene.gripper.opening
         outline = np.asarray(shape.exterior.coords)
         return float(np.linalg.norm(outline - self.center_of_mass, axis=1).max())
+
+    def surface_std(self) -> np.ndarray:
+        """Posterior std of the SDF (m) at points along the mean's zero level (bilinear
+        between cells), one per contour vertex: how uncertain the surface is."""
+        from scipy.interpolate import RegularGridInterpolator
+
+        lines = zero_contours(self.mean, self.grid)
+        if not lines:
+            return np.zeros(0)
+        c = self.grid.coords
+        std = RegularGridInterpolator((c, c), np.sqrt(self.var), bounds_error=False, fill_value=None)
+        return std(np.concatenate(lines)[:, ::-1])
 
     def prepare(self) -> "Belief":
         """Compute the grid fields, the mean shape and its centre of mass now (they are

@@ -273,6 +273,56 @@ def _convergence_summary(runs: list) -> dict:
             "final_p_f": final}
 
 
+QUALITY_SEEDS = 5
+QUALITY_PLANNERS = ("mean-shape", "gp-p", "gp-gpis-opt")
+#: A scene has heavy uncertainty when at least this fraction of its mean surface has a
+#: posterior std above half a cell (seed 0's belief).
+HEAVY_FRACTION = 0.10
+
+
+def _quality_scene(name: str) -> dict:
+    """Analytic P_F (1000 evaluation draws, the scene's sigma_g and friction) of each
+    built-in planner's grasp on one scene, for QUALITY_SEEDS independent sensor readings."""
+    from harness.belief import build_belief
+    from harness.quality import default_streams, draw_evaluation, estimate_p_f
+    from harness.scene import load_scene
+    from harness.seeding import stream
+    from planners.base import Problem
+    from planners.registry import make_planner
+
+    scene = load_scene(name)
+    out = {"scene": name, "p_f": {p: [] for p in QUALITY_PLANNERS}, "plan_s": {p: [] for p in QUALITY_PLANNERS}}
+    for seed in range(QUALITY_SEEDS):
+        belief = build_belief(scene, stream(seed, name, 0, "sensor")).prepare()
+        if seed == 0:
+            out["uncertain_fraction"] = float(np.mean(belief.surface_std() > 0.5 * scene.grid.cell))
+        problem = Problem.for_belief(belief)
+        draws = draw_evaluation(belief, SAMPLES, *default_streams(seed, name))
+        for pname in QUALITY_PLANNERS:
+            t0 = time.perf_counter()
+            plan = make_planner(pname).plan(problem, stream(seed, name, 0, "planner", pname))
+            out["plan_s"][pname].append(time.perf_counter() - t0)
+            p_f = estimate_p_f(plan.grasp, draws, problem.sigma_g, problem.friction, problem.opening,
+                               problem.jaw_width)[0].p_f if plan.grasp is not None else 0.0
+            out["p_f"][pname].append(p_f)
+    out["heavy"] = out["uncertain_fraction"] >= HEAVY_FRACTION
+    return out
+
+
+def quality(scenes=None) -> dict:
+    """Mean analytic P_F of each planner per library scene over QUALITY_SEEDS seeds, and
+    the means over all scenes and over the scenes with heavy uncertainty."""
+    from harness.scene import library_names
+
+    rows = [_in_fresh_process(_quality_scene, name) for name in (scenes or library_names())]
+    mean = {p: float(np.mean([np.mean(r["p_f"][p]) for r in rows])) for p in QUALITY_PLANNERS}
+    heavy = [r for r in rows if r["heavy"]]
+    heavy_mean = {p: float(np.mean([np.mean(r["p_f"][p]) for r in heavy])) if heavy else None
+                  for p in QUALITY_PLANNERS}
+    return {"seeds": QUALITY_SEEDS, "rows": rows, "mean_p_f": mean, "heavy_scenes": [r["scene"] for r in heavy],
+            "heavy_mean_p_f": heavy_mean}
+
+
 def run(which: str = "all", exact_max_mb: float = 2500.0, sizes=None) -> dict:
     """Run the named benchmark(s); returns a JSON-ready dict."""
     results = {}
@@ -280,15 +330,29 @@ def run(which: str = "all", exact_max_mb: float = 2500.0, sizes=None) -> dict:
         results["sampling"] = sampling(tuple(sizes or SAMPLING_SIZES), exact_max_mb)
     if which in ("planning", "all"):
         results["planning"] = planning(tuple(sizes or PLANNING_SIZES))
+    if which in ("quality", "all"):
+        results["quality"] = quality()
     return results[which] if which != "all" else results
 
 
 def format_results(results: dict) -> str:
     """A human-readable table of benchmark results."""
     if "rows" in results:
-        results = {("sampling" if "active_set_effect" in results else "planning"): results}
+        kind = ("sampling" if "active_set_effect" in results else "quality" if "heavy_scenes" in results
+                else "planning")
+        results = {kind: results}
     lines = []
     for name, res in results.items():
+        if name == "quality":
+            lines.append(f"quality: mean analytic P_F over {res['seeds']} seeds (scene sigma_g and friction)")
+            lines.append(f"{'scene':<15}" + "".join(f"{p:>13}" for p in QUALITY_PLANNERS) + "  heavy")
+            for r in res["rows"]:
+                lines.append(f"{r['scene']:<15}" + "".join(f"{np.mean(r['p_f'][p]):>13.3f}" for p in QUALITY_PLANNERS)
+                             + f"  {'yes' if r['heavy'] else ''}")
+            lines.append(f"{'mean':<15}" + "".join(f"{res['mean_p_f'][p]:>13.3f}" for p in QUALITY_PLANNERS))
+            if res["heavy_scenes"]:
+                lines.append(f"{'heavy mean':<15}" + "".join(f"{res['heavy_mean_p_f'][p]:>13.3f}"
+                                                             for p in QUALITY_PLANNERS))
         if name == "planning":
             lines.append(f"planning: one P_F estimate with {res['draws']} paired draws, scene '{res['scene']}', "
                          f"grasp {res['grasp']}")

@@ -273,7 +273,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_plan)
 
     bench = sub.add_parser("bench", help="benchmarks, measured as ratios in one run")
-    bench.add_argument("which", nargs="?", default="all", choices=["sampling", "planning", "all"])
+    bench.add_argument("which", nargs="?", default="all", choices=["sampling", "planning", "quality", "all"])
     bench.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     bench.add_argument("--exact-max-mb", type=float, default=2500.0,
                        help="skip the dense exact sampler when its covariance exceeds this (default 2500)")
