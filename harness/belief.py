@@ -67,6 +67,14 @@ class Belief:
         return self._fields[3]
 
     @cached_property
+    def mean_field(self):
+        """The posterior mean as a field batch (harness.grasp.SDFBatch) for contacts and
+        smooth interpolation; built once per belief."""
+        from harness.grasp import SDFBatch
+
+        return SDFBatch(self.grid, self.mean, self.gradient)
+
+    @cached_property
     def mean_shape(self):
         """The largest connected region inside the mean's zero level (a shapely Polygon)."""
         return largest_region(inside_region(self.mean, self.grid))
@@ -106,7 +114,7 @@ class Belief:
     def prepare(self) -> "Belief":
         """Compute the grid fields, the mean shape and its centre of mass now (they are
         otherwise computed on first use), so that planning times exclude them."""
-        self.gradient_var, self.characteristic_length  # noqa: B018
+        self.gradient_var, self.characteristic_length, self.mean_field.twist  # noqa: B018
         return self
 
     def sample(self, n: int, rng: np.random.Generator, method: str = "fast") -> ShapeSamples:

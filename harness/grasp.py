@@ -185,7 +185,7 @@ def _contacts_chunk(fields: SDFBatch, g1, g2, jaw_width, fidx, plate_lines, step
     offsets = np.linspace(-0.5 * jaw_width, 0.5 * jaw_width, plate_lines)
     ts = np.linspace(0.0, 1.0, steps)
     starts = g1[:, None, :] + offsets[None, :, None] * perp[:, None, :]  # (B, K, 2)
-    f = _march(fields, fidx, starts, d, ts)  # (B, K, T)
+    f = read_lines(fields, fidx, starts, d, ts)  # (B, K, T)
     inside = f <= 0.0
     hit = inside.any(axis=2)
 
@@ -219,7 +219,7 @@ def _contacts_chunk(fields: SDFBatch, g1, g2, jaw_width, fidx, plate_lines, step
     jaw, trow, tline = np.nonzero(tied)
     if len(jaw):
         at = starts[trow, tline] + depth[jaw, trow][:, None] * d[trow]
-        value, _ = _hermite(fields, fidx[trow], at)
+        value, _ = interpolate(fields, fidx[trow], at)
         earlier = value < -1e-9 * fields.grid.cell
         jaw, trow, tline = jaw[earlier], trow[earlier], tline[earlier]
     if len(jaw):
@@ -257,7 +257,7 @@ def _refine(fields, fidx, start, d, t, dt):
     the gradient there is long enough to define a normal."""
     lo, hi = t - dt, t + dt
     for _ in range(NEWTON_STEPS):
-        value, grad = _hermite(fields, fidx, start + t[:, None] * d)
+        value, grad = interpolate(fields, fidx, start + t[:, None] * d)
         slope = np.einsum("ij,ij->i", grad, d)
         with np.errstate(invalid="ignore", divide="ignore"):
             step = np.where(np.abs(slope) > 1e-12, value / slope, 0.0)
@@ -280,8 +280,9 @@ def _cell_coordinates(grid: Grid, points: np.ndarray):
     return ix, iy, ux - ix, uy - iy
 
 
-def _march(fields: SDFBatch, fidx, starts, d, ts) -> np.ndarray:
-    """Bilinear field values (B, K, T) along the lines starts[b, k] + ts * d[b]; outside
+def read_lines(fields: SDFBatch, fidx, starts, d, ts) -> np.ndarray:
+    """Bilinear field values (B, K, T) along the lines starts[b, k] + ts * d[b] of field
+    fidx[b] (a quick march; see :func:`interpolate` for the smooth interpolant); outside
     the grid's nodes the object is taken to be absent (a large positive value)."""
     grid, m = fields.grid, fields.grid.size
     t32 = ts.astype(np.float32)[None, None, :]
@@ -313,8 +314,9 @@ def _march(fields: SDFBatch, fidx, starts, d, ts) -> np.ndarray:
     return np.where(inside, upper, np.float32(1.0))
 
 
-def _hermite(fields: SDFBatch, fidx, points):
-    """Bicubic Hermite value (B,) and gradient (B, 2) at points (B, 2)."""
+def interpolate(fields: SDFBatch, fidx, points):
+    """Value (B,) and gradient (B, 2) of field fidx[b] at points (B, 2), through the
+    bicubic Hermite interpolant of the fields' values, gradients and cross derivatives."""
     m, h = fields.grid.size, fields.grid.cell
     ix, iy, s, r = _cell_coordinates(fields.grid, points)
     i00 = fidx * (m * m) + iy * m + ix

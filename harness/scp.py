@@ -245,9 +245,7 @@ class _BatchQP:
         ids = np.arange(1, len(rows) + 1, dtype=float)
         a = sp.csc_matrix((ids, (rows, cols)), shape=(p * rows_per, p * m))
         self._order = a.data.astype(np.int64) - 1  # CSC position -> our entry index
-        self._shape = a.shape
         self._a = a
-        self._entries_per = len(block)
         # P: a dense upper triangle over each problem's step, nothing on the slacks.
         iu = np.triu_indices(n)
         prow = (iu[0][None, :] + m * np.arange(p)[:, None]).ravel()
@@ -259,7 +257,6 @@ class _BatchQP:
         self.proximal = proximal
         self.tolerance = tolerance
         self._solver = None
-        self._rows_per = rows_per
 
     def solve(self, hessian, grad, h, jh, g, jg, rho, step_lo, step_hi):
         """The step (p, n) and the multipliers of the linearised constraints, lambda (p,

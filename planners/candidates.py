@@ -8,7 +8,7 @@ import numpy as np
 from scipy import ndimage
 
 from harness.belief import Belief
-from harness.grasp import SDFBatch, _march
+from harness.grasp import interpolate, read_lines
 from harness.geometry import polygons
 
 #: Parallel lines across the plate used to place the jaws (edges and middle).
@@ -53,8 +53,8 @@ def generate(belief: Belief, n: int, rng: np.random.Generator, opening: float, j
     p = surface_points(belief, count, rng)
     if len(p) == 0:
         return np.zeros((0, 2, 2))
-    mean = SDFBatch(grid, belief.mean, belief.gradient)
-    normal = _mean_normals(belief, p)
+    mean = belief.mean_field
+    normal = _mean_normals(mean, p)
     toward = belief.center_of_mass - p
     toward /= np.maximum(np.linalg.norm(toward, axis=1, keepdims=True), 1e-300)
     u = np.where((rng.random(count) < 0.5)[:, None], toward, -normal)
@@ -70,7 +70,7 @@ def generate(belief: Belief, n: int, rng: np.random.Generator, opening: float, j
     perp = np.column_stack([-u[:, 1], u[:, 0]])
     offsets = np.linspace(-0.5 * jaw_width, 0.5 * jaw_width, LINES)
     starts = (p - reach * u)[:, None, :] + offsets[None, :, None] * perp[:, None, :]
-    inside = (_march(mean, np.zeros(count, dtype=np.int64), starts, 2 * reach * u, (ts + reach) / (2 * reach))
+    inside = (read_lines(mean, np.zeros(count, dtype=np.int64), starts, 2 * reach * u, (ts + reach) / (2 * reach))
               <= 0).any(axis=1)  # (count, T)
     width = int(np.ceil(gap / (ts[1] - ts[0])))
     closed = ndimage.binary_closing(inside, structure=np.ones((1, 2 * width + 1), dtype=bool))
@@ -106,9 +106,6 @@ def _run_around(mask: np.ndarray, centre: int):
     return lo, hi
 
 
-def _mean_normals(belief: Belief, points: np.ndarray) -> np.ndarray:
-    from harness.grasp import _hermite
-
-    mean = SDFBatch(belief.grid, belief.mean, belief.gradient)
-    _, grad = _hermite(mean, np.zeros(len(points), dtype=np.int64), points)
+def _mean_normals(mean, points: np.ndarray) -> np.ndarray:
+    _, grad = interpolate(mean, np.zeros(len(points), dtype=np.int64), points)
     return grad / np.maximum(np.linalg.norm(grad, axis=1, keepdims=True), 1e-300)

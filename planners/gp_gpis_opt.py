@@ -20,7 +20,7 @@ import numpy as np
 
 from scipy.special import ndtr
 
-from harness.grasp import OK, SDFBatch, _hermite, find_contacts
+from harness.grasp import OK, Grasp, SDFBatch, find_contacts, interpolate
 from harness.quality import draw_evaluation, estimate_p_f
 from harness.scp import SCPSettings, minimize
 from planners import candidates as cand
@@ -113,8 +113,6 @@ class GPGPISOpt(Planner):
             status = "budget"
         trace = _trace(result, settings.constraint_tol)
         g = jaws[chosen]
-        from harness.grasp import Grasp
-
         return Plan(Grasp(tuple(g[0]), tuple(g[1])), status, estimate, iterations=int(result.iterations.max()),
                     evaluations=result.evaluations, seconds=clock.phases, trace=trace, message=message)
 
@@ -158,7 +156,7 @@ class SurrogateObjective:
         self.temperature = temperature
         self.cone = math.atan(problem.friction)
         self.gap = cand.clearance(belief, problem.sigma_g)
-        self.mean = SDFBatch(grid, belief.mean, belief.gradient)
+        self.mean = belief.mean_field
         scale = belief.gp.scale_
         # Variance of the value and mean variance of the two gradient components, both as
         # smooth fields on the grid (normalised by the prior's), read at the contacts.
@@ -207,9 +205,9 @@ class SurrogateObjective:
         hit = ok[:, _NOMINAL]
         contacts = np.concatenate([c1[:, _NOMINAL], c2[:, _NOMINAL]])
         contacts = np.where(np.concatenate([hit, hit])[:, None], contacts, 0.0)
-        values, _ = _hermite(self.uncertainty, np.repeat([0, 1], 2 * r), np.concatenate([contacts, contacts]))
+        values, _ = interpolate(self.uncertainty, np.repeat([0, 1], 2 * r), np.concatenate([contacts, contacts]))
         var, grad_var = values[: 2 * r].reshape(2, r), values[2 * r:].reshape(2, r)
-        _, grad = _hermite(self.mean, np.zeros(2 * r, dtype=np.int64), contacts)
+        _, grad = interpolate(self.mean, np.zeros(2 * r, dtype=np.int64), contacts)
         angle_sd = np.sqrt(np.maximum(grad_var, 0.0)) / np.maximum(np.linalg.norm(grad, axis=1).reshape(2, r), 1e-6)
         spread = np.sqrt(self.temperature**2 + angle_sd**2)  # (2, R)
         hold = ndtr((self.cone - a1) / spread[0][:, None]) * ndtr((self.cone - a2) / spread[1][:, None])

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from harness.grasp import OK, SDFBatch, ferrari_canny, find_contacts
+from harness.grasp import OK, ferrari_canny, find_contacts
 from planners.base import Plan, Planner, Problem
 from planners.sampling import search
 
@@ -25,8 +25,7 @@ class MeanShape(Planner):
 
     @staticmethod
     def _setup(problem: Problem, rng):
-        belief = problem.belief
-        return problem, SDFBatch(belief.grid, belief.mean, belief.gradient)
+        return problem, problem.belief.mean_field
 
     @staticmethod
     def _score(grasps, state):
