@@ -323,6 +323,32 @@ def quality(scenes=None) -> dict:
             "heavy_mean_p_f": heavy_mean}
 
 
+#: Candidate grasps per library scene in the physics benchmark (two trials each).
+PHYSICS_GRASPS_PER_SCENE = 12
+
+
+def physics(grasps_per_scene: int = PHYSICS_GRASPS_PER_SCENE, seed: int = 0) -> dict:
+    """Trials per second of the batched runner and of a naive one (a new world per trial,
+    no early stop) on the same trials, and the outcome agreement with a 4x finer step."""
+    from harness.physics.study import agreement, confusion, library_trials, outcome_table, run_batched, run_naive
+    from harness.physics.trial import Protocol
+
+    trials = library_trials(grasps_per_scene, seed).trials
+    protocol = Protocol()
+    batched = run_batched(trials, protocol)
+    naive = run_naive(trials, protocol)
+    fine = run_batched(trials, protocol.finer(4))
+    return {
+        "trials": len(trials), "time_step": protocol.time_step, "solver_iterations": protocol.solver_iterations,
+        "batched_trials_per_s": batched.rate, "naive_trials_per_s": naive.rate, "speedup": batched.rate / naive.rate,
+        "fine_step_agreement": agreement(batched.results, fine.results),
+        "fine_step_disagreements": confusion(batched.results, fine.results),
+        "naive_agreement": agreement(batched.results, naive.results),
+        "outcomes": outcome_table(batched.results), "outcomes_fine_step": outcome_table(fine.results),
+        "seconds": {"batched": batched.seconds, "naive": naive.seconds, "fine_step": fine.seconds},
+    }
+
+
 def run(which: str = "all", exact_max_mb: float = 2500.0, sizes=None) -> dict:
     """Run the named benchmark(s); returns a JSON-ready dict."""
     results = {}
@@ -332,17 +358,29 @@ def run(which: str = "all", exact_max_mb: float = 2500.0, sizes=None) -> dict:
         results["planning"] = planning(tuple(sizes or PLANNING_SIZES))
     if which in ("quality", "all"):
         results["quality"] = quality()
+    if which in ("physics", "all"):
+        results["physics"] = physics()
     return results[which] if which != "all" else results
 
 
 def format_results(results: dict) -> str:
     """A human-readable table of benchmark results."""
-    if "rows" in results:
+    if "speedup" in results:
+        results = {"physics": results}
+    elif "rows" in results:
         kind = ("sampling" if "active_set_effect" in results else "quality" if "heavy_scenes" in results
                 else "planning")
         results = {kind: results}
     lines = []
     for name, res in results.items():
+        if name == "physics":
+            lines.append(f"physics: {res['trials']} trials from the library scenes, step {res['time_step']:.6g} s, "
+                         f"{res['solver_iterations']} solver iterations")
+            lines.append(f"batched {res['batched_trials_per_s']:.2f} trials/s, naive (a new world per trial) "
+                         f"{res['naive_trials_per_s']:.2f} trials/s: speedup {res['speedup']:.2f}")
+            lines.append(f"agreement with a 4x finer step: {res['fine_step_agreement']:.3f}; "
+                         f"differences: {res['fine_step_disagreements'] or 'none'}")
+            lines.append("outcomes: " + ", ".join(f"{k} {v}" for k, v in res["outcomes"].items() if v))
         if name == "quality":
             lines.append(f"quality: mean analytic P_F over {res['seeds']} seeds (scene sigma_g and friction)")
             lines.append(f"{'scene':<15}" + "".join(f"{p:>13}" for p in QUALITY_PLANNERS) + "  heavy")

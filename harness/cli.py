@@ -7,6 +7,7 @@ import json
 import math
 import os
 import sys
+import time
 import traceback
 from pathlib import Path
 
@@ -135,6 +136,53 @@ def _quality(args) -> int:
     return 0
 
 
+def _simulate(args) -> int:
+    from tqdm import tqdm
+
+    from harness.belief import build_belief
+    from harness.grasp import Grasp
+    from harness.physics.simulate import SimulationSummary, make_trials, sample_polygons, truth_polygon
+    from harness.physics.trial import Runner
+    from harness.quality import default_streams
+    from harness.scene import load_scene
+    from harness.seeding import stream
+
+    scene = load_scene(args.scene)
+    grasp = Grasp(tuple(args.grasp[:2]), tuple(args.grasp[2:]))
+    problem = grasp.problem(scene.grid, scene.gripper.opening)
+    if problem:
+        raise InputError("--grasp", None, problem)
+    if args.frames is not None and Path(args.frames).exists() and not Path(args.frames).is_dir():
+        raise InputError("--frames", None, f"{args.frames} exists and is not a folder")
+    sigma_g, friction = _problem_options(args, scene)
+    shapes_rng, approach_rng, _ = default_streams(args.seed, scene.name)
+    if args.shapes == "posterior":
+        belief = build_belief(scene, stream(args.seed, scene.name, 0, "sensor"))
+        polygons = sample_polygons(belief, args.trials, shapes_rng)
+    else:
+        polygons = [truth_polygon(scene)]
+    approach = approach_rng.standard_normal((args.trials, 2, 2))
+    trials = make_trials(scene, grasp, polygons, approach, sigma_g, friction)
+    start = time.perf_counter()
+    with Runner() as runner, tqdm(total=len(trials), unit="trial", disable=None, file=sys.stderr) as bar:
+        results = runner.run(trials, frames=Path(args.frames) if args.frames else None, progress=bar.update)
+    summary = SimulationSummary(tuple(results), time.perf_counter() - start)
+    out = summary.as_dict()
+    if args.json:
+        print(json.dumps(out | {"scene": scene.name, "grasp": {"g1": list(grasp.g1), "g2": list(grasp.g2)},
+                                "shapes": args.shapes, "sigma_g": sigma_g, "friction": friction,
+                                "seed": args.seed}))
+    else:
+        counts = ", ".join(f"{k} {v}" for k, v in out["outcomes"].items() if v)
+        print(f"{scene.name} ({args.shapes}): success {out['successes']}/{out['trials']} = "
+              f"{out['success_rate']:.3f} (95% CI {out['ci_low']:.3f} to {out['ci_high']:.3f}), "
+              f"sigma_g = {sigma_g:g} m, friction = {friction:g}")
+        print(f"outcomes: {counts}; {out['trials_per_s']:.1f} trials/s")
+        if args.frames:
+            print(f"frames of the first trial in {args.frames}")
+    return 0
+
+
 def _planners_list(args) -> int:
     from planners.registry import available
 
@@ -163,8 +211,6 @@ def _problem_options(args, scene):
 
 
 def _plan(args) -> int:
-    import time
-
     from harness.belief import build_belief
     from harness.quality import default_streams, draw_evaluation, estimate_p_f
     from harness.scene import load_scene
@@ -253,6 +299,23 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     p.set_defaults(func=_quality)
 
+    p = sub.add_parser("simulate", help="physics trials of one grasp in pybullet")
+    p.add_argument("scene", help="library name or path to a scene file")
+    p.add_argument("--grasp", nargs=4, type=_coordinate, required=True, metavar=("X1", "Y1", "X2", "Y2"),
+                   help="jaw start points g1 and g2 in metres")
+    p.add_argument("--trials", type=_positive_int, default=100, help="number of trials (default 100)")
+    p.add_argument("--shapes", choices=["truth", "posterior"], default="posterior",
+                   help="the true shape, or a new posterior sample per trial (default posterior)")
+    p.add_argument("--seed", type=_seed, default=0, help="experiment seed (default 0)")
+    p.add_argument("--sigma-g", type=_non_negative, default=None,
+                   help="approach noise std per jaw start, metres (default: the scene's gripper.sigma_g)")
+    p.add_argument("--friction", type=_non_negative, default=None,
+                   help="jaw-object friction coefficient (default: the scene's physics.friction)")
+    p.add_argument("--frames", metavar="DIR", default=None,
+                   help="write PNG snapshots of each phase of the first trial into DIR")
+    p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    p.set_defaults(func=_simulate)
+
     planners = sub.add_parser("planners", help="the available planners")
     psub = planners.add_subparsers(dest="planners_command", required=True, parser_class=_Parser)
     p = psub.add_parser("list", help="name, description and parameters of every planner")
@@ -273,7 +336,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_plan)
 
     bench = sub.add_parser("bench", help="benchmarks, measured as ratios in one run")
-    bench.add_argument("which", nargs="?", default="all", choices=["sampling", "planning", "quality", "all"])
+    bench.add_argument("which", nargs="?", default="all", choices=["sampling", "planning", "quality", "physics", "all"])
     bench.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     bench.add_argument("--exact-max-mb", type=float, default=2500.0,
                        help="skip the dense exact sampler when its covariance exceeds this (default 2500)")

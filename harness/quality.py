@@ -112,11 +112,9 @@ def evaluate_draws(grasps, draws: EvaluationDraws, sigma_g: float, friction: flo
     normal is undefined (degenerate_normal), or when the grasp is not in force closure
     (friction_cone).
     """
-    starts = _as_starts(grasps)
+    starts = as_starts(grasps)
     g, n = len(starts), len(draws)
-    g1 = (starts[:, None, 0, :] + sigma_g * draws.approach[None, :, 0, :]).reshape(-1, 2)
-    g2 = (starts[:, None, 1, :] + sigma_g * draws.approach[None, :, 1, :]).reshape(-1, 2)
-    g1, g2 = _within_opening(g1, g2, opening)
+    g1, g2 = executed_starts(starts, draws.approach, sigma_g, opening)
     field = np.tile(np.arange(n), g)
     gamma = np.tile(np.maximum(0.0, friction + friction_spread * draws.friction), g)
     contacts = find_contacts(draws.shapes, g1, g2, jaw_width, field_index=field)
@@ -142,7 +140,7 @@ def estimate_p_f(grasps, draws: EvaluationDraws, sigma_g: float, friction: float
     return evaluate_draws(grasps, draws, sigma_g, friction, opening, jaw_width, friction_spread).estimates
 
 
-def _as_starts(grasps) -> np.ndarray:
+def as_starts(grasps) -> np.ndarray:
     if isinstance(grasps, Grasp):
         grasps = [grasps]
     if isinstance(grasps, (list, tuple)) and grasps and isinstance(grasps[0], Grasp):
@@ -150,7 +148,18 @@ def _as_starts(grasps) -> np.ndarray:
     return np.asarray(grasps, dtype=float).reshape(-1, 2, 2)
 
 
-def _within_opening(g1: np.ndarray, g2: np.ndarray, opening: float):
+def executed_starts(starts: np.ndarray, approach: np.ndarray, sigma_g: float, opening: float):
+    """The jaw starts executed under approach noise: each of G planned grasps (G, 2, 2)
+    with each of n draws of standard-normal deviates (n, 2, 2), g1 and g2 each moved by
+    sigma_g times its deviate, then narrowed to the opening. Returns g1, g2, each
+    (G * n, 2), grasp-major. The analytic P_F and the physics trials both use this."""
+    starts = np.asarray(starts, dtype=float).reshape(-1, 2, 2)
+    g1 = (starts[:, None, 0, :] + sigma_g * approach[None, :, 0, :]).reshape(-1, 2)
+    g2 = (starts[:, None, 1, :] + sigma_g * approach[None, :, 1, :]).reshape(-1, 2)
+    return within_opening(g1, g2, opening)
+
+
+def within_opening(g1: np.ndarray, g2: np.ndarray, opening: float):
     """Narrow each pair wider than the opening symmetrically about its midpoint."""
     d = g2 - g1
     width = np.linalg.norm(d, axis=1)

@@ -67,6 +67,9 @@ class Gripper:
     opening: float = 0.10
     jaw_width: float = 0.01
     sigma_g: float = 0.0025  # approach noise: std of each jaw start's placement error
+    force: float = 20.0  # N: the jaws' force limit
+    closing_speed: float = 0.05  # m/s: the jaws' largest closing speed, each
+    plate_height: float = 0.01  # m: how far the jaw plates reach above the object's top
 
 
 @dataclass(frozen=True)
@@ -183,6 +186,9 @@ def parse_scene(data: dict, source: str, base_dir: Path, default_name: str = "sc
         opening=gr.length("opening", cell, default=Gripper.opening, lo=0.0, hi=10.0),
         jaw_width=gr.length("jaw_width", cell, default=Gripper.jaw_width, lo=0.0, hi=10.0),
         sigma_g=gr.length("sigma_g", cell, default=Gripper.sigma_g, lo=0.0, hi=1.0, lo_open=False),
+        force=gr.number("force", Gripper.force, lo=0.0, hi=1e4, lo_open=True),
+        closing_speed=gr.number("closing_speed", Gripper.closing_speed, lo=0.0, hi=10.0, lo_open=True),
+        plate_height=gr.length("plate_height", cell, default=Gripper.plate_height, lo=0.0, hi=1.0),
     )
     gr.finish()
     root.finish()

@@ -80,3 +80,31 @@ def test_bench_planning_json_reports_seconds_per_estimate():
     assert [r["M"] for r in result["rows"]] == [20, 25]
     assert all(r["p_f_s"] > 0 and 0 <= r["p_f"] <= 1 for r in result["rows"])
     assert result["p_f_s_at_50"] is None and isinstance(result["p_f_growth_exponent"], float)
+
+
+
+
+def test_simulate_prints_the_json_contract_and_writes_frames(tmp_path, capsys):
+    frames = tmp_path / "frames"
+    assert main(["simulate", "rectangle", "--grasp", "-0.045", "0", "0.045", "0", "--trials", "2",
+                 "--shapes", "truth", "--sigma-g", "0", "--frames", str(frames), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert {"trials", "successes", "success_rate", "ci_low", "ci_high", "outcomes", "trials_per_s"} <= set(out)
+    assert out["successes"] == 2 and out["success_rate"] == 1.0
+    assert 0.0 < out["ci_low"] < 1.0 == out["ci_high"]
+    pictures = sorted(p.name for p in frames.glob("*.png"))
+    assert pictures == ["1-placed.png", "2-closed.png", "3-lifted.png", "4-shaken.png"]
+    assert all((frames / p).read_bytes()[:4] == b"\x89PNG" for p in pictures)
+
+
+def test_simulate_bad_input_gets_one_line_and_exit_code_2(tmp_path, capsys):
+    not_a_folder = tmp_path / "file"
+    not_a_folder.write_text("x")
+    for argv in (["simulate", "rectangle", "--grasp", "-0.06", "0", "0.06", "0"],  # wider than the opening
+                 ["simulate", "no_such_scene", "--grasp", "-0.045", "0", "0.045", "0"],
+                 ["simulate", "rectangle", "--grasp", "-0.045", "0", "0.045", "0", "--shapes", "mean"],
+                 ["simulate", "rectangle", "--grasp", "-0.045", "0", "0.045", "0", "--trials", "0"],
+                 ["simulate", "rectangle", "--grasp", "-0.045", "0", "0.045", "0", "--frames", str(not_a_folder)]):
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert len(err.strip().splitlines()) == 1 and err.startswith("gpis-harness: error: "), (argv, err)

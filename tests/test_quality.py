@@ -11,7 +11,7 @@ from scipy.stats import binom
 
 from harness.belief import build_belief
 from harness.grasp import Grasp, find_contacts
-from harness.quality import (FAILURE_REASONS, _within_opening, default_streams, draw_evaluation, estimate_p_f,
+from harness.quality import (FAILURE_REASONS, within_opening, default_streams, draw_evaluation, estimate_p_f,
                              evaluate_draws, wilson_interval)
 from harness.scene import load_scene
 from harness.seeding import stream
@@ -101,7 +101,7 @@ def test_friction_spread_draws_the_coefficient_around_its_mean(rectangle):
 def test_pairs_wider_than_the_opening_are_narrowed_about_their_midpoint():
     g1 = np.array([[-0.06, 0.0], [-0.03, 0.0]])
     g2 = np.array([[0.06, 0.01], [0.03, 0.0]])
-    a, b = _within_opening(g1, g2, 0.1)
+    a, b = within_opening(g1, g2, 0.1)
     np.testing.assert_allclose(np.linalg.norm(b - a, axis=1), [0.1, 0.06], atol=1e-15)
     np.testing.assert_allclose((a + b) / 2, (g1 + g2) / 2, atol=1e-15)
 

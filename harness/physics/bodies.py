@@ -1,0 +1,220 @@
+"""Shapes as rigid bodies: the zero level of an SDF field as a polygon (largest region,
+holes kept, simplified), its convex decomposition, the exact mass properties of the
+extruded prism, and the pybullet multibody."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pybullet as pb
+import shapely
+from shapely.geometry import Polygon
+
+from harness.geometry import Grid, inside_region, largest_region, polygons
+
+#: Simplification tolerance, in cells: a quarter cell moves the outline far less than
+#: the posterior's uncertainty and keeps the pieces few.
+SIMPLIFY_CELLS = 0.25
+
+
+def field_polygon(field: np.ndarray, grid: Grid) -> Polygon:
+    """The largest connected region inside the zero level of ``field`` (sub-cell marching
+    squares), holes kept, simplified within a quarter cell; empty if there is none."""
+    region = largest_region(inside_region(field, grid))
+    if region.is_empty:
+        return region
+    simple = region.simplify(SIMPLIFY_CELLS * grid.cell, preserve_topology=True)
+    return largest_region(simple) if not simple.is_empty else region
+
+
+def convex_pieces(polygon: Polygon) -> list[Polygon]:
+    """A decomposition of ``polygon`` (holes allowed) into convex pieces: GEOS's
+    constrained Delaunay triangulation, then Hertel-Mehlhorn: remove each diagonal
+    (longest first) whose two endpoints stay convex in the merged piece. At most four
+    times the optimal number of pieces."""
+    triangles = polygons(shapely.constrained_delaunay_triangles(polygon))
+    index: dict[tuple[float, float], int] = {}
+    rings: list[list[int] | None] = []
+    for tri in triangles:
+        if tri.area <= 0.0:
+            continue
+        coords = shapely.geometry.polygon.orient(tri, 1.0).exterior.coords[:-1]
+        rings.append([index.setdefault((x, y), len(index)) for x, y in coords])
+    points = np.array(list(index), dtype=float).reshape(-1, 2)
+    owner = {(ring[i], ring[(i + 1) % 3]): k for k, ring in enumerate(rings) for i in range(3)}
+    diagonals = sorted({(a, b) for a, b in owner if a < b and (b, a) in owner},
+                       key=lambda e: (-float(np.hypot(*(points[e[0]] - points[e[1]]))), e))
+    for a, b in diagonals:
+        p, q = owner.get((a, b)), owner.get((b, a))
+        if p is None or q is None or p == q:
+            continue
+        merged = _merge(rings[p], rings[q], a, b, points)
+        if merged is None:
+            continue
+        rings[p], rings[q] = merged, None
+        del owner[(a, b)], owner[(b, a)]
+        for i, v in enumerate(merged):
+            owner[(v, merged[(i + 1) % len(merged)])] = p
+    return [Polygon(points[ring]) for ring in rings if ring is not None]
+
+
+def _merge(ring_p: list[int], ring_q: list[int], a: int, b: int, points: np.ndarray) -> list[int] | None:
+    """The union of two counter-clockwise convex rings sharing the edge a->b (in p) and
+    b->a (in q), or None if it is not convex at a or b."""
+    i, j = ring_p.index(b), ring_q.index(a)
+    from_b = ring_p[i:] + ring_p[:i]       # b, ..., a  (all of p, starting at b)
+    from_a = ring_q[j:] + ring_q[:j]       # a, ..., b  (all of q, starting at a)
+    merged = from_b + from_a[1:-1]         # b ... a ... (q's vertices between a and b)
+    n = len(merged)
+    for v in (0, len(from_b) - 1):         # the positions of b and a
+        prev, here, nxt = points[merged[v - 1]], points[merged[v]], points[merged[(v + 1) % n]]
+        d1, d2 = here - prev, nxt - here
+        if d1[0] * d2[1] - d1[1] * d2[0] < -1e-18:
+            return None
+    return merged
+
+
+@dataclass(frozen=True)
+class MassProperties:
+    """Of a uniform prism: mass (kg), centre of mass (3,) and inertia tensor (3, 3) about
+    it, in the body's frame (the polygon's plane at z = 0 to z = thickness)."""
+
+    mass: float
+    com: np.ndarray
+    inertia: np.ndarray
+
+
+def prism_mass_properties(poly: Polygon, thickness: float, density: float) -> MassProperties:
+    """Exact mass properties of a polygon (holes allowed) extruded by ``thickness``."""
+    area, first, second = _area_moments(poly)
+    mass = density * area * thickness
+    cx, cy = first / area
+    # Second moments about the centroid: int x^2, int y^2, int xy dA.
+    sxx = second[0] - area * cx * cx
+    syy = second[1] - area * cy * cy
+    sxy = second[2] - area * cx * cy
+    lam = density * thickness
+    z2 = mass * thickness**2 / 12.0
+    inertia = np.array([[lam * syy + z2, -lam * sxy, 0.0],
+                        [-lam * sxy, lam * sxx + z2, 0.0],
+                        [0.0, 0.0, lam * (sxx + syy)]])
+    return MassProperties(mass, np.array([cx, cy, 0.5 * thickness]), inertia)
+
+
+def _area_moments(poly: Polygon):
+    """Area, first moments (int x, int y) and second moments (int x^2, int y^2, int xy)
+    of a polygon with holes, by the shoelace formulas over its rings."""
+    area = 0.0
+    first = np.zeros(2)
+    second = np.zeros(3)
+    poly = shapely.geometry.polygon.orient(poly, sign=1.0)  # exterior ccw, holes cw
+    for ring in [poly.exterior, *poly.interiors]:
+        xy = np.asarray(ring.coords)
+        x0, y0, x1, y1 = xy[:-1, 0], xy[:-1, 1], xy[1:, 0], xy[1:, 1]
+        cross = x0 * y1 - x1 * y0
+        area += cross.sum() / 2
+        first += np.array([((x0 + x1) * cross).sum(), ((y0 + y1) * cross).sum()]) / 6
+        second += np.array([((x0 * x0 + x0 * x1 + x1 * x1) * cross).sum() / 12,
+                            ((y0 * y0 + y0 * y1 + y1 * y1) * cross).sum() / 12,
+                            ((x0 * y1 + 2 * x0 * y0 + 2 * x1 * y1 + x1 * y0) * cross).sum() / 24])
+    return area, first, second
+
+
+@dataclass(frozen=True)
+class Body:
+    """An object in a pybullet world: its id, the polygon and pieces it was built from,
+    and the mass properties of the whole prism (in the polygon's frame)."""
+
+    body_id: int
+    polygon: Polygon
+    pieces: tuple
+    mass: MassProperties
+
+
+#: Bullet's collision margin on the object's convex pieces (m); see :func:`_core`.
+COLLISION_MARGIN = 0.001
+#: Colour of the object in rendered frames (RGBA).
+OBJECT_RGBA = (0.85, 0.45, 0.15, 1.0)
+
+
+def create_body(client: int, polygon: Polygon, thickness: float, density: float, friction: float,
+                origin=(0.0, 0.0), visual: bool = False) -> Body:
+    """The polygon extruded to a prism of ``thickness`` lying on the table (z = 0), its
+    frame shifted by ``origin`` (x, y), as one rigid pybullet multibody: each convex piece
+    a link fixed to the first, with its own exact mass and principal inertia, so the
+    composite's centre of mass and inertia are those of the whole prism. Lateral friction
+    ``friction`` on every piece; visual shapes only when ``visual`` (for rendering)."""
+    pieces = convex_pieces(polygon)
+    shapes, visuals, inertial = [], [], []
+    margins = []
+    for piece in pieces:
+        core, margin = _core(piece, thickness)
+        margins.append(margin)
+        shapes.append(pb.createCollisionShape(pb.GEOM_MESH, vertices=_prism_vertices(core, margin, thickness - margin),
+                                              physicsClientId=client))
+        visuals.append(pb.createVisualShape(pb.GEOM_MESH, vertices=_prism_vertices(piece, 0.0, thickness),
+                                            indices=_prism_triangles(len(piece.exterior.coords) - 1),
+                                            rgbaColor=OBJECT_RGBA, physicsClientId=client) if visual else -1)
+        props = prism_mass_properties(piece, thickness, density)
+        moments, axes = np.linalg.eigh(props.inertia)
+        if np.linalg.det(axes) < 0:
+            axes[:, 0] *= -1
+        inertial.append((props, moments, _quaternion(axes)))
+    base, links = inertial[0], inertial[1:]
+    n = len(links)
+    body = pb.createMultiBody(
+        baseMass=base[0].mass, baseCollisionShapeIndex=shapes[0], baseVisualShapeIndex=visuals[0],
+        basePosition=[float(origin[0]), float(origin[1]), 0.0],
+        baseInertialFramePosition=base[0].com.tolist(), baseInertialFrameOrientation=base[2],
+        linkMasses=[lk[0].mass for lk in links], linkCollisionShapeIndices=shapes[1:],
+        linkVisualShapeIndices=visuals[1:], linkPositions=[[0, 0, 0]] * n, linkOrientations=[[0, 0, 0, 1]] * n,
+        linkInertialFramePositions=[lk[0].com.tolist() for lk in links],
+        linkInertialFrameOrientations=[lk[2] for lk in links], linkParentIndices=[0] * n,
+        linkJointTypes=[pb.JOINT_FIXED] * n, linkJointAxis=[[0, 0, 1]] * n, physicsClientId=client)
+    for link, (_, moments, _), margin in zip(range(-1, n), inertial, margins):
+        pb.changeDynamics(body, link, localInertiaDiagonal=moments.tolist(), lateralFriction=friction,
+                          collisionMargin=margin, physicsClientId=client)
+    return Body(body, polygon, tuple(pieces), prism_mass_properties(polygon, thickness, density))
+
+
+def _core(piece: Polygon, thickness: float) -> tuple[Polygon, float]:
+    """The piece shrunk by Bullet's collision margin, and the margin: Bullet rounds a
+    convex hull outwards by its margin, so the hull of the shrunk piece collides like
+    the piece itself (up to corners rounded by the margin). A piece too thin to shrink
+    keeps its shape and no margin."""
+    margin = min(COLLISION_MARGIN, 0.25 * thickness)
+    core = piece.buffer(-margin, join_style="mitre")
+    if isinstance(core, Polygon) and not core.is_empty and core.area > 0.05 * piece.area:
+        return core, margin
+    return piece, 0.0
+
+
+def _prism_vertices(piece: Polygon, z0: float, z1: float) -> list:
+    """Bottom ring (counter-clockwise) then top ring of the prism over a convex piece."""
+    ring = np.asarray(shapely.geometry.polygon.orient(piece, 1.0).exterior.coords)[:-1]
+    return np.concatenate([np.column_stack([ring, np.full(len(ring), z0)]),
+                           np.column_stack([ring, np.full(len(ring), z1)])]).tolist()
+
+
+def _prism_triangles(n: int) -> list[int]:
+    """Outward triangles of a convex prism whose 2n vertices are the counter-clockwise
+    bottom ring followed by the top ring."""
+    tris = []
+    for k in range(1, n - 1):
+        tris += [0, k + 1, k]              # bottom, facing down
+        tris += [n, n + k, n + k + 1]      # top, facing up
+    for k in range(n):
+        a, b = k, (k + 1) % n
+        tris += [a, b, n + b, a, n + b, n + a]
+    return tris
+
+
+def _quaternion(r: np.ndarray) -> list:
+    """Unit quaternion (x, y, z, w) of a rotation matrix."""
+    w = np.sqrt(max(0.0, 1 + r[0, 0] + r[1, 1] + r[2, 2])) / 2
+    x = np.copysign(np.sqrt(max(0.0, 1 + r[0, 0] - r[1, 1] - r[2, 2])) / 2, r[2, 1] - r[1, 2])
+    y = np.copysign(np.sqrt(max(0.0, 1 - r[0, 0] + r[1, 1] - r[2, 2])) / 2, r[0, 2] - r[2, 0])
+    z = np.copysign(np.sqrt(max(0.0, 1 - r[0, 0] - r[1, 1] + r[2, 2])) / 2, r[1, 0] - r[0, 1])
+    q = np.array([x, y, z, w])
+    return (q / np.linalg.norm(q)).tolist()

@@ -1,0 +1,139 @@
+"""The trial set of the fidelity study and the physics benchmark, and the measures
+taken on it: outcome agreement with a finer time step, and throughput of the batched
+runner against a naive one (a new world per trial, no early stop).
+
+The set: for every library scene, one belief (seed, realisation 0), candidate grasps
+drawn on its mean shape by the planners' shared generator (the kind of grasps the
+planners consider, good and bad), and per grasp two trials, one on the true shape and
+one on a posterior sample, each under its own approach-noise draw.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from harness.belief import build_belief
+from harness.physics.simulate import make_trials, truth_polygon
+from harness.physics.trial import OUTCOMES, Protocol, Runner, Trial, TrialResult
+from harness.scene import library_names, load_scene
+from harness.seeding import stream
+
+
+#: Candidates drawn per scene for the ranked set, and the analytic draws ranking them.
+RANKED_CANDIDATES = 100
+RANKED_DRAWS = 100
+
+
+@dataclass(frozen=True)
+class TrialSet:
+    """Trials with, per trial, its scene, whether it is on the true shape, and the
+    analytic verdict of the same draw: force closure of the executed grasp (point
+    contacts, the scene's friction) on the same shape field."""
+
+    trials: list[Trial]
+    scenes: list[str]
+    on_truth: list[bool]
+    force_closure: list[bool]
+
+    def __len__(self) -> int:
+        return len(self.trials)
+
+
+def library_trials(grasps_per_scene: int = 12, seed: int = 0, ranked: bool = True) -> TrialSet:
+    """2 x grasps_per_scene trials per library scene (truth, posterior), in a fixed order.
+
+    ``ranked``: the grasps are the best of RANKED_CANDIDATES candidates by analytic P_F
+    (what GP-P returns, and what the experiments mostly execute); otherwise the first
+    candidates as drawn (good and bad alike, a harder set).
+    """
+    from harness.grasp import OK, SDFBatch, find_contacts, force_closure
+    from harness.physics.bodies import field_polygon
+    from harness.quality import draw_evaluation, estimate_p_f, executed_starts
+    from planners.candidates import generate
+
+    out = TrialSet([], [], [], [])
+    for name in library_names():
+        scene = load_scene(name)
+        belief = build_belief(scene, stream(seed, name, 0, "sensor"))
+        g, friction = scene.gripper, scene.physics.friction
+        count = RANKED_CANDIDATES if ranked else grasps_per_scene
+        grasps = generate(belief, count, stream(seed, name, 0, "study", "grasps"), g.opening, g.jaw_width, g.sigma_g)
+        if ranked:
+            draws = draw_evaluation(belief, RANKED_DRAWS, *(stream(seed, name, 0, "study", k)
+                                                            for k in ("rank-shapes", "rank-approach", "rank-friction")))
+            p_f = [e.p_f for e in estimate_p_f(grasps, draws, g.sigma_g, friction, g.opening, g.jaw_width)]
+            grasps = grasps[np.argsort(p_f, kind="stable")[::-1][:grasps_per_scene]]
+        n = len(grasps)
+        samples = belief.sample(n, stream(seed, name, 0, "study", "shapes"))
+        fields = SDFBatch(scene.grid, np.concatenate([scene.true_sdf[None], samples.values]),
+                          np.concatenate([scene.true_sdf_gradient[None], samples.gradients]))
+        approach = stream(seed, name, 0, "study", "approach").standard_normal((n, 2, 2, 2))
+        truth = truth_polygon(scene)
+        for k, grasp in enumerate(grasps):
+            for on_truth, polygon, field in ((True, truth, 0),
+                                             (False, field_polygon(samples.values[k], scene.grid), k + 1)):
+                deviates = approach[k, 0 if on_truth else 1][None]
+                out.trials.extend(make_trials(scene, grasp, [polygon], deviates, g.sigma_g, friction))
+                g1, g2 = executed_starts(grasp, deviates, g.sigma_g, g.opening)
+                contacts = find_contacts(fields, g1, g2, g.jaw_width, field_index=np.array([field]))
+                closure = bool(contacts.status[0] == OK and force_closure(
+                    contacts.c1, contacts.c2, contacts.n1, contacts.n2, friction)[0])
+                out.scenes.append(name)
+                out.on_truth.append(on_truth)
+                out.force_closure.append(closure)
+    return out
+
+
+@dataclass(frozen=True)
+class Timed:
+    results: list[TrialResult]
+    seconds: float
+
+    @property
+    def simulated(self) -> int:
+        """Trials that needed the simulator (not decided by geometry alone)."""
+        return sum(r.outcome not in ("approach_collision", "empty_shape") for r in self.results)
+
+    @property
+    def rate(self) -> float:
+        return len(self.results) / self.seconds
+
+
+def run_batched(trials: list[Trial], protocol: Protocol, batch_size: int = 16) -> Timed:
+    start = time.perf_counter()
+    with Runner(protocol, batch_size=batch_size) as runner:
+        results = runner.run(trials)
+    return Timed(results, time.perf_counter() - start)
+
+
+def run_naive(trials: list[Trial], protocol: Protocol) -> Timed:
+    """The reference: a new pybullet world (client) for every trial, which then runs
+    the whole protocol (no early stop); same step, same solver, same checks."""
+    start = time.perf_counter()
+    results = []
+    for trial in trials:
+        with Runner(protocol, batch_size=1, early_stop=False) as runner:
+            results += runner.run([trial])
+    return Timed(results, time.perf_counter() - start)
+
+
+def agreement(a: list[TrialResult], b: list[TrialResult]) -> float:
+    """Fraction of trials with the same outcome."""
+    return float(np.mean([x.outcome == y.outcome for x, y in zip(a, b, strict=True)]))
+
+
+def confusion(a: list[TrialResult], b: list[TrialResult]) -> dict:
+    """Counts of (outcome in a, outcome in b) pairs that differ."""
+    pairs: dict = {}
+    for x, y in zip(a, b, strict=True):
+        if x.outcome != y.outcome:
+            key = f"{x.outcome} -> {y.outcome}"
+            pairs[key] = pairs.get(key, 0) + 1
+    return dict(sorted(pairs.items(), key=lambda kv: -kv[1]))
+
+
+def outcome_table(results: list[TrialResult]) -> dict:
+    return {name: sum(r.outcome == name for r in results) for name in OUTCOMES}

@@ -1,0 +1,110 @@
+"""Extruded bodies against exact geometry: mass properties in closed form, convex
+pieces that tile the polygon, pybullet's mass and centre of mass, resting height."""
+
+from __future__ import annotations
+
+import numpy as np
+import pybullet as pb
+import pytest
+import shapely
+from shapely.geometry import box
+
+from harness.belief import build_belief
+from harness.geometry import inside_region, largest_region
+from harness.physics.bodies import convex_pieces, create_body, field_polygon, prism_mass_properties
+from harness.physics.simulate import make_trials, truth_polygon
+from harness.physics.trial import Runner
+from harness.scene import load_scene
+from harness.seeding import stream
+
+
+@pytest.fixture
+def client():
+    c = pb.connect(pb.DIRECT)
+    pb.setGravity(0, 0, -9.81, physicsClientId=c)
+    yield c
+    pb.disconnect(physicsClientId=c)
+
+
+def _body_mass_and_com(client, body) -> tuple[float, np.ndarray]:
+    """Total mass and centre of mass of a multibody, read back from pybullet."""
+    total, moment = 0.0, np.zeros(3)
+    for link in range(-1, pb.getNumJoints(body, physicsClientId=client)):
+        m = pb.getDynamicsInfo(body, link, physicsClientId=client)[0]
+        pos = (pb.getBasePositionAndOrientation(body, physicsClientId=client)[0] if link < 0
+               else pb.getLinkState(body, link, physicsClientId=client)[0])
+        total += m
+        moment += m * np.asarray(pos)
+    return total, moment / total
+
+
+
+def test_prism_mass_properties_match_the_box_closed_form():
+    a, b, t, rho = 0.06, 0.03, 0.02, 700.0
+    props = prism_mass_properties(box(0.01, -0.02, 0.01 + a, -0.02 + b), t, rho)
+    m = rho * a * b * t
+    assert props.mass == pytest.approx(m, rel=1e-12)
+    np.testing.assert_allclose(props.com, [0.01 + a / 2, -0.02 + b / 2, t / 2], atol=1e-15)
+    np.testing.assert_allclose(np.diag(props.inertia), [m * (b * b + t * t) / 12, m * (a * a + t * t) / 12,
+                                                        m * (a * a + b * b) / 12], rtol=1e-10)
+    assert abs(props.inertia[0, 1]) < 1e-15 * m
+
+
+@pytest.mark.parametrize("name", ["tape", "stapler", "can_opener", "plane"])
+def test_convex_pieces_are_convex_and_tile_the_polygon(name):
+    polygon = truth_polygon(load_scene(name))
+    pieces = convex_pieces(polygon)
+    assert len(pieces) >= 2  # these shapes are concave
+    for piece in pieces:
+        assert piece.area >= piece.convex_hull.area * (1 - 1e-9)
+    union = shapely.union_all(pieces)
+    assert abs(sum(p.area for p in pieces) - union.area) < 1e-9 * polygon.area  # no overlaps
+    assert union.symmetric_difference(polygon).area < 1e-6 * polygon.area     # and no gaps
+
+
+@pytest.mark.parametrize("name", ["tape", "stapler", "rectangle"])
+def test_body_mass_and_centre_of_mass_match_the_polygon(client, name):
+    scene = load_scene(name)
+    polygon = truth_polygon(scene)
+    t, rho = scene.physics.thickness, scene.physics.density
+    body = create_body(client, polygon, t, rho, 0.5, origin=(0.3, -0.2))
+    mass, com = _body_mass_and_com(client, body.body_id)
+    assert mass == pytest.approx(rho * polygon.area * t, rel=0.01)
+    size = np.sqrt(polygon.area)
+    expected = np.array([polygon.centroid.x + 0.3, polygon.centroid.y - 0.2, t / 2])
+    assert np.linalg.norm(com - expected) < 0.01 * size
+    # and the simplified polygon keeps the true shape's area within 1 %
+    assert polygon.area == pytest.approx(scene.shape.area, rel=0.01)
+
+
+def test_a_posterior_sample_body_has_the_samples_inside_area(client):
+    scene = load_scene("tape")
+    belief = build_belief(scene, stream(0, "tape", 0, "sensor"))
+    field = belief.sample(1, stream(0, "test-physics")).values[0]
+    polygon = field_polygon(field, scene.grid)
+    region = largest_region(inside_region(field, scene.grid))
+    assert polygon.area == pytest.approx(region.area, rel=0.01)
+    # a second formulation of the inside area: count the cells whose centre is inside
+    cells = (field < 0).sum() * scene.grid.cell ** 2
+    assert polygon.area == pytest.approx(cells, rel=0.05)
+    body = create_body(client, polygon, scene.physics.thickness, scene.physics.density, 0.5)
+    mass, _ = _body_mass_and_com(client, body.body_id)
+    assert mass == pytest.approx(scene.physics.density * scene.physics.thickness * polygon.area, rel=0.01)
+
+
+def test_an_empty_sample_gives_an_empty_polygon_and_the_outcome_empty_shape():
+    scene = load_scene("rectangle")
+    empty = field_polygon(np.full((scene.grid.size, scene.grid.size), 0.01), scene.grid)
+    assert empty.is_empty
+    trial = make_trials(scene, [[-0.045, 0], [0.045, 0]], [empty], np.zeros((1, 2, 2)), 0.0, 0.5)
+    assert Runner().run(trial)[0].outcome == "empty_shape"
+
+
+def test_the_body_rests_on_the_table_at_its_true_height(client):
+    plane = pb.createCollisionShape(pb.GEOM_PLANE, physicsClientId=client)
+    pb.createMultiBody(0, plane, physicsClientId=client)
+    body = create_body(client, box(-0.03, -0.015, 0.03, 0.015), 0.03, 400.0, 0.5)
+    for _ in range(120):
+        pb.stepSimulation(physicsClientId=client)
+    z = pb.getBasePositionAndOrientation(body.body_id, physicsClientId=client)[0][2]
+    assert z == pytest.approx(0.015, abs=2e-4)  # Bullet's collision margin is compensated

@@ -1,0 +1,78 @@
+"""Physics trials: the approach check against the rectangle's closed form, the
+calibration grasps, the unstable outcome, and determinism. The large counts live in
+``gpis-harness bench physics``."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from harness.physics.simulate import make_trials, truth_polygon
+from harness.physics.trial import Protocol, Runner, Trial, approach_blocked
+from harness.scene import load_scene
+
+
+def _rectangle_trial(g1, g2, scene=None) -> Trial:
+    scene = scene or load_scene("rectangle")
+    return make_trials(scene, [g1, g2], [truth_polygon(scene)], np.zeros((1, 2, 2)), 0.0,
+                       scene.physics.friction)[0]
+
+
+def test_approach_collision_matches_the_rectangle_closed_form():
+    # The pads reach PLATE_THICKNESS outwards from g and jaw_width / 2 to either side.
+    rng = np.random.default_rng(5)
+    for _ in range(200):
+        x1, x2 = -rng.uniform(0.0, 0.05), rng.uniform(0.0, 0.05)
+        y = rng.uniform(-0.03, 0.03)
+        blocked = approach_blocked(_rectangle_trial((x1, y), (x2, y)))
+        overlaps_y = abs(y) < 0.015 + 0.005
+        expected = overlaps_y and (x1 > -0.03 or x2 < 0.03)
+        assert blocked == expected, (x1, x2, y)
+
+
+
+
+def test_the_calibration_grasps_on_the_rectangle():
+    scene = load_scene("rectangle")
+    good = _rectangle_trial((-0.045, 0.0), (0.045, 0.0), scene)
+    miss = _rectangle_trial((-0.045, 0.03), (0.045, 0.03), scene)
+    inside = _rectangle_trial((-0.02, 0.0), (0.045, 0.0), scene)
+    with Runner() as runner:
+        results = runner.run([good] * 6 + [miss, inside])
+    assert [r.outcome for r in results[:6]] == ["success"] * 6  # >= 98 % of 6 is all of them
+    assert results[6].outcome == "no_contact"
+    assert results[7].outcome == "approach_collision"
+    for r in results[:6]:
+        assert r.grip_width == pytest.approx(0.06, abs=5e-4)   # the jaws stall on the true faces
+        assert abs(r.closing_turn) < 0.01                      # a square-on grasp does not turn it
+        assert r.rise == pytest.approx(Protocol().lift_height, abs=0.005)
+
+
+def test_a_blown_up_simulation_is_recorded_as_unstable():
+    trial = _rectangle_trial((-0.045, 0.0), (0.045, 0.0))
+    with Runner(Protocol(max_speed=-1.0)) as runner:  # any motion counts as runaway
+        assert runner.run([trial])[0].outcome == "unstable"
+
+
+def test_the_same_seed_gives_the_same_trials_and_outcomes():
+    from harness.belief import build_belief
+    from harness.physics.simulate import sample_polygons
+    from harness.quality import default_streams
+    from harness.seeding import stream
+
+    scene = load_scene("marker")
+    grasp = [[0.033, -0.014], [0.022, 0.034]]
+
+    def run_once():
+        belief = build_belief(scene, stream(3, "marker", 0, "sensor"))
+        shapes_rng, approach_rng, _ = default_streams(3, "marker")
+        polygons = sample_polygons(belief, 5, shapes_rng)
+        trials = make_trials(scene, grasp, polygons, approach_rng.standard_normal((5, 2, 2)),
+                             scene.gripper.sigma_g, scene.physics.friction)
+        with Runner(batch_size=3) as runner:  # two batches: a world reset in between
+            return trials, [repr(r.as_dict()) for r in runner.run(trials)]
+
+    (trials_a, results_a), (trials_b, results_b) = run_once(), run_once()
+    assert [t.polygon.wkb for t in trials_a] == [t.polygon.wkb for t in trials_b]
+    assert [t.g1 + t.g2 for t in trials_a] == [t.g1 + t.g2 for t in trials_b]
+    assert results_a == results_b  # bit for bit: outcomes, steps, grip widths, turns
