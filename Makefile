@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: setup test test-all scenes bench clean
+.PHONY: setup eval eval-quick test test-all scenes bench clean
 
 setup: $(STAMP)
 
@@ -14,6 +14,12 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -e '.[dev,cluster]'
 	touch $(STAMP)
+
+eval: setup
+	$(BIN)/gpis-harness eval experiments/default.toml
+
+eval-quick: setup
+	$(BIN)/gpis-harness eval experiments/quick.toml
 
 test: setup
 	$(BIN)/python -m pytest -q
@@ -28,4 +34,4 @@ bench: setup
 	$(BIN)/gpis-harness bench all
 
 clean:
-	rm -rf $(VENV) .pytest_cache .hypothesis results/scenes
+	rm -rf $(VENV) .pytest_cache .hypothesis results/scenes results/default results/quick

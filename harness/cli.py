@@ -6,6 +6,7 @@ import argparse
 import json
 import math
 import os
+import re
 import sys
 import time
 import traceback
@@ -17,7 +18,15 @@ PROG = "gpis-harness"
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse that reports usage errors as one line (exit 2) instead of a usage block."""
+    """argparse that reports usage errors as one line (exit 2) instead of a usage block.
+
+    Coordinates such as ``-9.1e-05`` (what ``plan --json`` prints) must read as numbers, not as
+    options; argparse's own pattern knows only ``-1`` and ``-1.5``, so it is widened here.
+    """
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$")
 
     def error(self, message: str):
         command = self.prog.removeprefix(PROG).strip()
@@ -183,6 +192,41 @@ def _simulate(args) -> int:
     return 0
 
 
+def _eval(args) -> int:
+    from harness.experiment import load_config, run_experiment
+
+    config = load_config(args.config)
+    out = Path(args.out) if args.out else Path("results") / config.name
+    if out.exists() and not out.is_dir():
+        raise InputError("--out", None, f"{out} exists and is not a folder")
+
+    def log(line: str) -> None:
+        print(line, file=sys.stderr, flush=True)
+
+    stats = run_experiment(config, out, workers=args.workers, scheduler=args.scheduler, fresh=args.fresh, log=log)
+    if stats.interrupted:
+        log(f"interrupted after {stats.seconds:.0f} s; {stats.plans} plans and {stats.trials} trials were "
+            f"recorded in {out}; run the same command again to resume")
+        return 130
+    log(f"{stats.plans} plans and {stats.trials} trials in {stats.seconds:.0f} s")
+    if not args.no_report:
+        _print_report(out, figures=True)
+    return 1 if stats.errors else 0
+
+
+def _report(args) -> int:
+    _print_report(Path(args.dir), figures=not args.no_figures)
+    return 0
+
+
+def _print_report(out: Path, figures: bool) -> None:
+    from harness.report import display_table, write_report
+
+    tables = write_report(out, figures=figures)
+    print(display_table(tables["summary"]).to_markdown(index=False))
+    print(f"\ntables and figures in {out}", file=sys.stderr)
+
+
 def _planners_list(args) -> int:
     from planners.registry import available
 
@@ -335,8 +379,26 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     p.set_defaults(func=_plan)
 
+    p = sub.add_parser("eval", help="run (or resume) an experiment, then write its report")
+    p.add_argument("config", nargs="?", default="experiments/default.toml",
+                   help="experiment config (default experiments/default.toml)")
+    p.add_argument("--out", default=None, help="results folder (default results/<config name>)")
+    p.add_argument("--workers", type=_positive_int, default=None,
+                   help="worker processes (default: the number of cores)")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="a Dask scheduler address, or 'local' for a Dask LocalCluster")
+    p.add_argument("--fresh", action="store_true", help="discard this experiment's ledger rows and start over")
+    p.add_argument("--no-report", action="store_true", help="skip the report at the end")
+    p.set_defaults(func=_eval)
+
+    p = sub.add_parser("report", help="tables and figures from a results folder's ledger")
+    p.add_argument("dir", help="results folder written by eval")
+    p.add_argument("--no-figures", action="store_true", help="tables only")
+    p.set_defaults(func=_report)
+
     bench = sub.add_parser("bench", help="benchmarks, measured as ratios in one run")
-    bench.add_argument("which", nargs="?", default="all", choices=["sampling", "planning", "quality", "physics", "all"])
+    bench.add_argument("which", nargs="?", default="all",
+                       choices=["sampling", "planning", "quality", "physics", "all"])
     bench.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     bench.add_argument("--exact-max-mb", type=float, default=2500.0,
                        help="skip the dense exact sampler when its covariance exceeds this (default 2500)")

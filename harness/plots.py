@@ -105,3 +105,164 @@ def scene_figure(belief: Belief, rng: np.random.Generator, n_blur: int = 100, ti
         fontsize=10,
     )
     return fig
+
+
+# ---------------------------------------------------------------------------
+# Report figures (harness.report)
+
+PLANNER_COLOURS = ("tab:gray", "tab:blue", "tab:red", "tab:green", "tab:purple", "tab:orange", "tab:brown")
+OUTCOME_COLOURS = {"success": "tab:green", "slipped": "tab:orange", "dropped": "tab:red", "no_contact": "tab:gray",
+                   "approach_collision": "tab:purple", "unstable": "black", "empty_shape": "tab:cyan",
+                   "no_plan": "lightgray"}
+
+
+def grasps_figure(belief: Belief, grasps: dict, rng: np.random.Generator, n_blur: int = 64, title: str = ""):
+    """The GPIS-Blur of one belief with each planner's grasp: jaw starts joined by the
+    closing line, a bar across each jaw of the plate's width."""
+    grid, scene = belief.grid, belief.scene
+    half = 0.5 * grid.extent * 1e3
+    fig, ax = plt.subplots(figsize=(6.2, 6.2), constrained_layout=True)
+    prob, _ = inside_probability(belief, n_blur, rng)
+    ax.imshow(prob, origin="lower", extent=(-half, half, -half, half), cmap="Greys", vmin=0, vmax=1,
+              interpolation="bilinear")
+    _outline(ax, scene.shape, color="tab:blue", lw=1.0, ls="--")
+    w = scene.gripper.jaw_width * 1e3 / 2
+    for k, (label, grasp) in enumerate(grasps.items()):
+        colour = PLANNER_COLOURS[k % len(PLANNER_COLOURS)]
+        if grasp is None:
+            ax.plot([], [], color=colour, lw=2, label=f"{label}: no grasp")
+            continue
+        g = np.asarray(grasp, dtype=float) * 1e3
+        axis = (g[1] - g[0]) / max(np.linalg.norm(g[1] - g[0]), 1e-9)
+        normal = np.array([-axis[1], axis[0]])
+        ax.plot(g[:, 0], g[:, 1], color=colour, lw=1.5, label=label)
+        for p in g:
+            ends = np.array([p - w * normal, p + w * normal])
+            ax.plot(ends[:, 0], ends[:, 1], color=colour, lw=4, solid_capstyle="butt")
+    ax.set_xlim(-half, half)
+    ax.set_ylim(-half, half)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (mm)")
+    ax.set_ylabel("y (mm)")
+    ax.legend(loc="lower left", fontsize=8, framealpha=0.85)
+    ax.set_title(title, fontsize=10)
+    return fig
+
+
+def success_figure(summary):
+    """Physical success per scene and planner (posterior samples, filled; true shape,
+    hollow) with Wilson 95 % intervals."""
+    scenes = list(dict.fromkeys(summary.scene))
+    planners = list(dict.fromkeys(summary.planner))
+    fig, ax = plt.subplots(figsize=(max(7.5, 1.0 * len(scenes) + 2), 5.0), constrained_layout=True)
+    width = 0.8 / len(planners)
+    for k, planner in enumerate(planners):
+        s = summary[summary.planner == planner].set_index("scene").loc[scenes]
+        x = np.arange(len(scenes)) + (k - (len(planners) - 1) / 2) * width
+        colour = PLANNER_COLOURS[k % len(PLANNER_COLOURS)]
+        err = np.vstack([s.success_rate - s.success_ci_low, s.success_ci_high - s.success_rate])
+        ax.bar(x, s.success_rate, width * 0.92, color=colour, label=f"{planner} (posterior)")
+        ax.errorbar(x, s.success_rate, yerr=np.nan_to_num(err), fmt="none", ecolor="black", lw=0.8, capsize=2)
+        ax.plot(x, s.truth_success_rate, ls="none", marker="o", mfc="white", mec=colour, mew=1.5, ms=6,
+                label=f"{planner} (true shape)")
+    ax.set_xticks(np.arange(len(scenes)), scenes, rotation=30, ha="right")
+    ax.set_ylim(0, 1.05)
+    ax.set_ylabel("physical success rate")
+    ax.legend(fontsize=7, ncol=len(planners), loc="upper center", bbox_to_anchor=(0.5, -0.22))
+    ax.set_title("Success in physics trials\nbars: posterior samples with 95% CI; circles: true shape",
+                 fontsize=10)
+    return fig
+
+
+def failures_figure(fails):
+    """Trial outcomes per planner (posterior samples and true shape), stacked fractions."""
+    outcomes = [c for c in OUTCOME_COLOURS if c in fails.columns]
+    rows = fails.assign(name=fails.planner + "\n" + fails.shapes)
+    counts = rows[outcomes].to_numpy(dtype=float)
+    frac = counts / np.maximum(counts.sum(axis=1, keepdims=True), 1)
+    fig, ax = plt.subplots(figsize=(max(5.5, 0.9 * len(rows) + 2.5), 4.2), constrained_layout=True)
+    bottom = np.zeros(len(rows))
+    for j, outcome in enumerate(outcomes):
+        ax.bar(np.arange(len(rows)), frac[:, j], 0.7, bottom=bottom, color=OUTCOME_COLOURS[outcome], label=outcome)
+        bottom += frac[:, j]
+    ax.set_xticks(np.arange(len(rows)), rows.name, fontsize=8)
+    ax.set_ylabel("fraction of trials")
+    ax.set_ylim(0, 1)
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.0, 1.0))
+    ax.set_title("Trial outcomes by planner", fontsize=10)
+    return fig
+
+
+def calibration_figure(bins):
+    """Reliability diagram: plans binned by analytic P_F against their physical success."""
+    fig, ax = plt.subplots(figsize=(5.0, 5.0), constrained_layout=True)
+    ax.plot([0, 1], [0, 1], color="0.6", ls="--", lw=1, label="perfect calibration")
+    if len(bins):
+        err = np.vstack([bins.success_rate - bins.ci_low, bins.ci_high - bins.success_rate])
+        ax.errorbar(bins.mean_p_f, bins.success_rate, yerr=err, fmt="o", color="tab:blue", capsize=3,
+                    label="plans binned by P_F (95% CI)")
+        for _, b in bins.iterrows():
+            ax.annotate(f"{int(b.plans)}", (b.mean_p_f, b.success_rate), textcoords="offset points",
+                        xytext=(5, -10), fontsize=7, color="0.3")
+    ax.set_xlim(0, 1.02)
+    ax.set_ylim(0, 1.02)
+    ax.set_aspect("equal")
+    ax.set_xlabel("analytic P_F of the plan")
+    ax.set_ylabel("physical success on posterior samples")
+    ax.legend(fontsize=8, loc="upper left")
+    ax.set_title("Calibration (numbers: plans per bin)", fontsize=10)
+    return fig
+
+
+def report_figures(out_dir, data, summary, bins, fails) -> list:
+    """Write the report's PNGs into ``out_dir/figures``; returns their paths."""
+    from pathlib import Path
+
+    from harness.belief import build_belief
+    from harness.experiment import scene_of
+    from harness.seeding import stream
+
+    folder = Path(out_dir) / "figures"
+    folder.mkdir(exist_ok=True)
+    written = []
+
+    def save(fig, name):
+        path = folder / name
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+        written.append(path)
+
+    per_scene = summary[summary.scene != "all"]
+    save(success_figure(per_scene), "success.png")
+    if not fails.empty:
+        save(failures_figure(fails), "failures.png")
+    save(calibration_figure(bins), "calibration.png")
+    config = _config_view(data["config"])
+    plans = data["plans"]
+    for path in config.scenes:
+        scene = scene_of(config, path)
+        belief = build_belief(scene, stream(config.seed, scene.name, 0, "sensor"))
+        rows = plans[(plans.scene == scene.name) & (plans.realisation == 0)].set_index("planner")
+        grasps = {}
+        for entry in config.planners:
+            row = rows.loc[entry.label] if entry.label in rows.index else None
+            ok = row is not None and not pd_isna(row.g1x)
+            grasps[entry.label] = ((row.g1x, row.g1y), (row.g2x, row.g2y)) if ok else None
+        fig = grasps_figure(belief, grasps, stream(config.seed, scene.name, 0, "blur"),
+                            title=f"{scene.name}, realisation 0: GPIS-Blur and the planners' grasps\n"
+                                  "blue dashed: true shape; bars: jaw plates at their start points")
+        save(fig, f"grasps-{scene.name}.png")
+    return written
+
+
+def pd_isna(value) -> bool:
+    return value is None or (isinstance(value, float) and np.isnan(value))
+
+
+def _config_view(config: dict):
+    from harness.experiment import ExperimentConfig, PlannerEntry
+
+    d = dict(config)
+    d["planners"] = tuple(PlannerEntry(**p) for p in d["planners"])
+    d["scenes"] = tuple(d["scenes"])
+    return ExperimentConfig(**d)

@@ -131,10 +131,16 @@ def load_scene(name_or_path: str | Path, overrides: dict | None = None) -> Scene
     values before validation, so quantities given in cells follow the new grid.
     """
     path = resolve(str(name_or_path))
+    data = read_toml(path)
+    return parse_scene(_merged(data, overrides or {}), source=str(path), base_dir=path.parent, default_name=path.stem)
+
+
+def read_toml(path: Path) -> dict:
+    """A TOML file's document; InputError (one line naming the file) when it cannot be read."""
     source = str(path)
     try:
-        text = path.read_bytes().decode("utf-8")
-        data = tomllib.loads(text)
+        text = Path(path).read_bytes().decode("utf-8")
+        return tomllib.loads(text)
     except UnicodeDecodeError:
         raise InputError(source, None, "not a text file (invalid UTF-8)") from None
     except tomllib.TOMLDecodeError as exc:
@@ -143,7 +149,6 @@ def load_scene(name_or_path: str | Path, overrides: dict | None = None) -> Scene
         raise InputError(source, None, "invalid TOML: arrays or inline tables nested too deeply") from None
     except OSError as exc:
         raise InputError(source, None, f"cannot read: {exc.strerror or exc}") from None
-    return parse_scene(_merged(data, overrides or {}), source=source, base_dir=path.parent, default_name=path.stem)
 
 
 def _merged(data: dict, overrides: dict) -> dict:
@@ -156,7 +161,7 @@ def _merged(data: dict, overrides: dict) -> dict:
 
 def parse_scene(data: dict, source: str, base_dir: Path, default_name: str = "scene") -> Scene:
     """Validate a parsed scene document (see ``docs/scenes.md``)."""
-    root = _Table(data, "", source)
+    root = Table(data, "", source)
     name = root.string("name", default_name)
     description = root.string("description", "")
 
@@ -199,7 +204,7 @@ def parse_scene(data: dict, source: str, base_dir: Path, default_name: str = "sc
 # Shapes
 
 
-def _shape(t: "_Table", cell: float, base_dir: Path) -> BaseGeometry:
+def _shape(t: "Table", cell: float, base_dir: Path) -> BaseGeometry:
     kind = t.string("type", choices=SHAPE_TYPES)
     if kind == "polygon":
         exterior = t.points("exterior")
@@ -248,7 +253,7 @@ def _shape(t: "_Table", cell: float, base_dir: Path) -> BaseGeometry:
     return geom
 
 
-def _valid_polygon(t: "_Table", geom: Polygon, field: str) -> Polygon:
+def _valid_polygon(t: "Table", geom: Polygon, field: str) -> Polygon:
     if not geom.is_valid:
         reason = shapely.is_valid_reason(geom)
         m = re.match(r"([^\[]+)\[([-0-9.eE+]+) ([-0-9.eE+]+)\]", reason)
@@ -258,7 +263,7 @@ def _valid_polygon(t: "_Table", geom: Polygon, field: str) -> Polygon:
     return geom
 
 
-def _outline(t: "_Table", cell: float, base_dir: Path) -> Polygon:
+def _outline(t: "Table", cell: float, base_dir: Path) -> Polygon:
     rel = t.string("path")
     scale = t.number("scale", lo=0.0, lo_open=True, hi=100.0)
     centring = t.string("center", "centroid", choices=("centroid", "bbox", "none"))
@@ -303,7 +308,7 @@ def _outline(t: "_Table", cell: float, base_dir: Path) -> Polygon:
     return geom
 
 
-def _random_shape(t: "_Table", cell: float) -> Polygon:
+def _random_shape(t: "Table", cell: float) -> Polygon:
     """The largest region below zero of |x|^2/R^2 - 1 + amplitude * xi(x), where xi is
     white noise smoothed by a Gaussian of standard deviation ``lengthscale`` (so its
     correlation is exp(-d^2 / (4 lengthscale^2))), shifted and scaled to mean 0, std 1.
@@ -362,7 +367,7 @@ def _check_shape_on_grid(shape: BaseGeometry, grid: Grid, source: str) -> None:
 # Sensor and GPIS sections
 
 
-def _sensor(t: "_Table", cell: float, base_dir: Path) -> SensorModel:
+def _sensor(t: "Table", cell: float, base_dir: Path) -> SensorModel:
     noise = t.length("noise", cell, default=0.5 * cell, lo=0.0, lo_open=True)
     band = t.length("surface_band", cell, default=1.5 * cell, lo=0.0, lo_open=True)
     depth = t.length("interior_depth", cell, default=2.0 * cell, lo=0.0)
@@ -407,7 +412,7 @@ def _half_plane(normal: np.ndarray, offset: float) -> Polygon:
     return Polygon(corners)
 
 
-def _gpis(t: "_Table", cell: float, truncation: float) -> GPISSettings:
+def _gpis(t: "Table", cell: float, truncation: float) -> GPISSettings:
     lengthscale = t.length("lengthscale", cell, default=2.7 * cell, lo=0.0, lo_open=True)
     settings = GPISSettings(
         lengthscale=lengthscale,
@@ -434,8 +439,9 @@ _BARE_KEY = re.compile(r"[A-Za-z0-9_-]+")
 _QUANTITY = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([a-z]+)(\^2)?\s*$")
 
 
-class _Table:
-    """Reads typed fields from one table, tracking which keys were used."""
+class Table:
+    """Reads typed fields from one TOML table, tracking which keys were used; every
+    problem is an InputError naming the file and the dotted field."""
 
     def __init__(self, data: Any, where: str, source: str):
         self.data = data
@@ -464,19 +470,19 @@ class _Table:
         if unknown:
             raise self.error(_key_name(unknown[0]), "unknown field")
 
-    def table(self, key: str, required: bool = True) -> "_Table":
+    def table(self, key: str, required: bool = True) -> "Table":
         value = self._get(key, _REQUIRED if required else {})
         if not isinstance(value, dict):
             raise self.error(key, f"expected a table, got {_type_name(value)}")
-        return _Table(value, self._path(key), self.source)
+        return Table(value, self._path(key), self.source)
 
-    def tables(self, key: str, min_count: int) -> list["_Table"]:
+    def tables(self, key: str, min_count: int) -> list["Table"]:
         value = self._get(key, _REQUIRED if min_count else [])
         if not isinstance(value, list) or not all(isinstance(v, dict) for v in value):
             raise self.error(key, f"expected a list of tables, got {_type_name(value)}")
         if len(value) < min_count:
             raise self.error(key, f"needs at least {min_count} entries")
-        return [_Table(v, f"{self._path(key)}[{k}]", self.source) for k, v in enumerate(value)]
+        return [Table(v, f"{self._path(key)}[{k}]", self.source) for k, v in enumerate(value)]
 
     def list(self, key: str, default: Any = _REQUIRED) -> list:
         value = self._get(key, default)

@@ -86,7 +86,8 @@ def test_bench_planning_json_reports_seconds_per_estimate():
 
 def test_simulate_prints_the_json_contract_and_writes_frames(tmp_path, capsys):
     frames = tmp_path / "frames"
-    assert main(["simulate", "rectangle", "--grasp", "-0.045", "0", "0.045", "0", "--trials", "2",
+    # Coordinates in exponent notation (as plan --json prints them) are numbers, not options.
+    assert main(["simulate", "rectangle", "--grasp", "-4.5e-2", "-1e-9", "0.045", "0", "--trials", "2",
                  "--shapes", "truth", "--sigma-g", "0", "--frames", str(frames), "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert {"trials", "successes", "success_rate", "ci_low", "ci_high", "outcomes", "trials_per_s"} <= set(out)

@@ -41,11 +41,13 @@ def sample_polygons(belief: Belief, n: int, rng: np.random.Generator) -> list[Po
 
 
 def make_trials(scene: Scene, grasp, polygons: list[Polygon], approach: np.ndarray, sigma_g: float,
-                friction: float, gripper: GripperAdapter | None = None) -> list[Trial]:
+                friction, gripper: GripperAdapter | None = None) -> list[Trial]:
     """Trial i: ``polygons[i]`` (or the one polygon for all) with grasp executed under
-    ``approach[i]`` (standard-normal deviates (n, 2, 2) for g1 and g2)."""
+    ``approach[i]`` (standard-normal deviates (n, 2, 2) for g1 and g2) and jaw-object
+    friction ``friction`` (one value, or one per trial)."""
     planned = as_starts(grasp)[0]
     n = len(approach)
+    frictions = np.broadcast_to(np.asarray(friction, dtype=float), (n,))
     if len(polygons) not in (1, n):
         raise ValueError("one polygon, or one per approach draw")
     g1, g2 = executed_starts(planned, approach, sigma_g, scene.gripper.opening)
@@ -58,7 +60,7 @@ def make_trials(scene: Scene, grasp, polygons: list[Polygon], approach: np.ndarr
         length = float(np.hypot(*d))
         axis = d / length if length > 1e-9 else nominal
         trials.append(Trial(polygons[i if len(polygons) > 1 else 0], tuple(g1[i]), tuple(g2[i]), tuple(axis),
-                            phys.thickness, phys.density, friction, gripper))
+                            phys.thickness, phys.density, float(frictions[i]), gripper))
     return trials
 
 

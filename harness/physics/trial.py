@@ -51,9 +51,9 @@ class Protocol:
     time_step: float = 1.0 / 480.0
     solver_iterations: int = 50
     lift_height: float = 0.10
-    lift_time: float = 0.5           # minimum-jerk profile: peak acceleration 5.77 h / T^2
-    hold_time: float = 0.25
-    shake_time: float = 1.0
+    lift_time: float = 0.4           # minimum-jerk profile: peak acceleration 5.77 h / T^2 (3.6 m/s^2)
+    hold_time: float = 0.1
+    shake_time: float = 0.5          # one full circle at 2 Hz
     shake_frequency: float = 2.0     # Hz
     shake_amplitude: float = 0.02    # m, in the plane, circular, under a sin^2 envelope
     shake_turn: float = 0.25         # rad, about the vertical through the grasp centre

@@ -1,0 +1,263 @@
+"""Tables and statistics from an experiment's ledger (``gpis-harness report DIR``).
+
+Per scene and planner: trials, physical success on posterior samples and on the true
+shape (Wilson 95 % intervals), analytic P_F (pooled over the realisations' draws, Wilson),
+mean Ferrari-Canny, median plan time, and whether every expected row is present. Paired
+comparisons use the common random numbers: trial i of two planners on the same cell met
+the same shape and the same approach noise. Calibration compares each plan's analytic P_F
+with its physical success.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from scipy import stats
+
+from harness.errors import InputError
+from harness.ledger import FILENAME, Ledger
+from harness.quality import wilson_interval
+
+BOOTSTRAP = 2000
+BASELINE = "mean-shape"
+ALL = "all"
+SUMMARY_COLUMNS = ["scene", "planner", "n_trials", "success_rate", "success_ci_low", "success_ci_high",
+                   "truth_success_rate", "truth_ci_low", "truth_ci_high", "p_f", "p_f_ci_low", "p_f_ci_high",
+                   "ferrari_canny_mean", "plan_time_median_s", "plans_ok", "complete"]
+RELIABILITY_BINS = 10
+
+
+def load(out_dir: Path, config_hash: str | None = None) -> dict:
+    """The latest experiment in ``out_dir``'s ledger as DataFrames plus its config."""
+    path = Path(out_dir) / FILENAME
+    if not Path(out_dir).is_dir():
+        raise InputError(str(out_dir), None, "no such results folder")
+    with Ledger(path, create=False) as ledger:
+        key = config_hash or ledger.latest_hash()
+        runs = ledger.runs()
+        runs = runs[runs.config_hash == key]
+        out = {"hash": key, "runs": runs, "config": json.loads(runs.iloc[-1].config),
+               "environment": json.loads(runs.iloc[-1].environment)}
+        for table in ("plans", "analytic", "trials"):
+            out[table] = ledger.table(key, table)
+    return out
+
+
+def expected(config: dict) -> tuple[list[str], list[str], int]:
+    scenes = [Path(p).stem for p in config["scenes"]]
+    planners = [p["label"] for p in config["planners"]]
+    return scenes, planners, config["realisations"]
+
+
+def summary(data: dict) -> pd.DataFrame:
+    """One row per scene and planner, then one 'all' row per planner (pooled)."""
+    config, plans, analytic, trials = data["config"], data["plans"], data["analytic"], data["trials"]
+    scenes, planners, realisations = expected(config)
+    per_plan = config["posterior_trials"] + config["truth_trials"]
+    rows = []
+    for scene in scenes + [ALL]:
+        for planner in planners:
+            sel = (lambda df: df[(df.planner == planner) & ((df.scene == scene) if scene != ALL else True)])
+            t, p, a = sel(trials), sel(plans), sel(analytic)
+            n_scenes = len(scenes) if scene == ALL else 1
+            post, truth = t[t.shapes == "posterior"], t[t.shapes == "truth"]
+            k, n = int((post.outcome == "success").sum()), len(post)
+            kt, nt = int((truth.outcome == "success").sum()), len(truth)
+            successes = float((a.p_f * a.draws).round().sum())
+            # Plans with nothing executed count as P_F 0 over the same number of draws.
+            draws = int(config["analytic_draws"]) * int((p.executed == 0).sum()) + int(a.draws.sum())
+            lo, hi = wilson_interval(k, n) if n else (np.nan, np.nan)
+            tlo, thi = wilson_interval(kt, nt) if nt else (np.nan, np.nan)
+            plo, phi = wilson_interval(successes, draws) if draws else (np.nan, np.nan)
+            fc = (a.ferrari_canny_mean.sum() / len(p)) if len(p) else np.nan
+            rows.append({
+                "scene": scene, "planner": planner, "n_trials": n,
+                "success_rate": k / n if n else np.nan, "success_ci_low": float(lo), "success_ci_high": float(hi),
+                "truth_success_rate": kt / nt if nt else np.nan, "truth_ci_low": float(tlo),
+                "truth_ci_high": float(thi),
+                "p_f": successes / draws if draws else np.nan, "p_f_ci_low": float(plo), "p_f_ci_high": float(phi),
+                "ferrari_canny_mean": fc, "plan_time_median_s": float(p.plan_time_s.median()) if len(p) else np.nan,
+                "plans_ok": f"{int(p.executed.sum())}/{realisations * n_scenes}",
+                "complete": bool(len(p) == realisations * n_scenes and len(t) == realisations * n_scenes * per_plan),
+            })
+    return pd.DataFrame(rows, columns=SUMMARY_COLUMNS)
+
+
+def _paired(trials: pd.DataFrame, a: str, b: str, shapes: str) -> pd.DataFrame:
+    keys = ["scene", "realisation", "trial"]
+    ta = trials[(trials.planner == a) & (trials.shapes == shapes)][keys + ["outcome"]]
+    tb = trials[(trials.planner == b) & (trials.shapes == shapes)][keys + ["outcome"]]
+    m = ta.merge(tb, on=keys, suffixes=("_a", "_b"))
+    m["a"] = (m.outcome_a == "success").astype(int)
+    m["b"] = (m.outcome_b == "success").astype(int)
+    return m
+
+
+def comparisons(data: dict, seed: int = 0) -> pd.DataFrame:
+    """Each planner against mean-shape, and every gp-gpis-opt entry against every gp-p
+    entry: success difference (a - b) on the same trials, a paired bootstrap 95 % interval
+    (trials resampled in pairs within each cell, so the interval is conditional on the
+    plans), and McNemar's exact p on the discordant pairs."""
+    config, trials = data["config"], data["trials"]
+    scenes, planners, _ = expected(config)
+    names = {p["label"]: p["name"] for p in config["planners"]}
+    pairs = []
+    for base in (lab for lab in planners if names[lab] == BASELINE):
+        pairs += [(lab, base) for lab in planners if lab != base]
+    for opt in (lab for lab in planners if names[lab] == "gp-gpis-opt"):
+        pairs += [(opt, gp) for gp in planners if names[gp] == "gp-p" and (opt, gp) not in pairs]
+    rng = np.random.default_rng(np.random.SeedSequence([seed, 0x7EB0]))
+    rows = []
+    for a, b in pairs:
+        for shapes in ("posterior", "truth"):
+            m = _paired(trials, a, b, shapes)
+            for scene in scenes + [ALL]:
+                s = m if scene == ALL else m[m.scene == scene]
+                if s.empty:
+                    continue
+                d = (s.a - s.b).to_numpy()
+                groups = [g.index.to_numpy() for _, g in s.reset_index(drop=True).groupby(["scene", "realisation"])]
+                boot = _bootstrap_means(d, groups, rng)
+                n01, n10 = int(((s.a == 0) & (s.b == 1)).sum()), int(((s.a == 1) & (s.b == 0)).sum())
+                p = stats.binomtest(n10, n10 + n01, 0.5).pvalue if n10 + n01 else 1.0
+                rows.append({"scene": scene, "shapes": shapes, "planner": a, "versus": b, "pairs": len(d),
+                             "difference": float(d.mean()), "ci_low": float(np.percentile(boot, 2.5)),
+                             "ci_high": float(np.percentile(boot, 97.5)), "only_planner": n10, "only_versus": n01,
+                             "mcnemar_p": float(p)})
+    return pd.DataFrame(rows)
+
+
+def _bootstrap_means(d: np.ndarray, groups: list[np.ndarray], rng: np.random.Generator) -> np.ndarray:
+    total = np.zeros(BOOTSTRAP)
+    for g in groups:
+        picks = rng.integers(0, len(g), size=(BOOTSTRAP, len(g)))
+        total += d[g][picks].sum(axis=1)
+    return total / len(d)
+
+
+def calibration(data: dict) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Per plan: analytic P_F against success on posterior samples. Returns the per-planner
+    table (Brier score over trials, Spearman over plans) and the reliability bins."""
+    plans = data["plans"][data["plans"].executed == 1]
+    post = data["trials"][data["trials"].shapes == "posterior"]
+    rate = (post.assign(s=(post.outcome == "success").astype(float))
+            .groupby(["scene", "realisation", "planner"]).s.agg(["sum", "count"]).reset_index())
+    per_plan = plans.merge(data["analytic"], on=["scene", "realisation", "planner"]).merge(
+        rate, on=["scene", "realisation", "planner"])
+    rows = []
+    for planner, g in list(per_plan.groupby("planner")) + [(ALL, per_plan)]:
+        if g.empty:
+            continue
+        # Brier over trials: each trial's forecast is its plan's P_F.
+        brier = float((((g.p_f ** 2) * (g["count"] - g["sum"]) + ((1 - g.p_f) ** 2) * g["sum"]).sum())
+                      / g["count"].sum())
+        rho = stats.spearmanr(g.p_f, g["sum"] / g["count"]).statistic if len(g) > 2 else np.nan
+        rows.append({"planner": planner, "plans": len(g), "brier": brier, "spearman": float(rho),
+                     "mean_p_f": float(g.p_f.mean()), "success_rate": float(g["sum"].sum() / g["count"].sum())})
+    edges = np.linspace(0, 1, RELIABILITY_BINS + 1)
+    which = np.clip(np.digitize(per_plan.p_f, edges[1:-1]), 0, RELIABILITY_BINS - 1)
+    bins = []
+    for k in range(RELIABILITY_BINS):
+        g = per_plan[which == k]
+        if g.empty:
+            continue
+        s, n = float(g["sum"].sum()), float(g["count"].sum())
+        lo, hi = wilson_interval(s, n)
+        bins.append({"bin_low": edges[k], "bin_high": edges[k + 1], "plans": len(g), "trials": int(n),
+                     "mean_p_f": float(g.p_f.mean()), "success_rate": s / n, "ci_low": float(lo),
+                     "ci_high": float(hi)})
+    return pd.DataFrame(rows), pd.DataFrame(bins)
+
+
+def failures(data: dict) -> pd.DataFrame:
+    """Trial outcomes by planner and shape source (counts)."""
+    t = data["trials"]
+    table = t.groupby(["planner", "shapes", "outcome"]).size().unstack("outcome", fill_value=0)
+    return table.reset_index()
+
+
+# ---------------------------------------------------------------------------
+# Writing
+
+
+def _fmt_rate(rate, lo, hi) -> str:
+    return "–" if pd.isna(rate) else f"{rate:.2f} [{lo:.2f}, {hi:.2f}]"
+
+
+def display_table(s: pd.DataFrame) -> pd.DataFrame:
+    """The summary as a paper table: rates with their intervals in one cell."""
+    return pd.DataFrame({
+        "scene": s.scene, "planner": s.planner, "trials": s.n_trials,
+        "success (posterior)": [_fmt_rate(*v) for v in zip(s.success_rate, s.success_ci_low, s.success_ci_high)],
+        "success (true shape)": [_fmt_rate(*v) for v in zip(s.truth_success_rate, s.truth_ci_low,
+                                                             s.truth_ci_high)],
+        "analytic P_F": [_fmt_rate(*v) for v in zip(s.p_f, s.p_f_ci_low, s.p_f_ci_high)],
+        "Ferrari-Canny": s.ferrari_canny_mean.map(lambda v: "–" if pd.isna(v) else f"{v:.3f}"),
+        "plan time (s)": s.plan_time_median_s.map(lambda v: "–" if pd.isna(v) else f"{v:.2f}"),
+        "plans": s.plans_ok, "complete": s.complete.map({True: "yes", False: "NO"}),
+    })
+
+
+def _latex(s: pd.DataFrame) -> str:
+    """booktabs table; the best posterior success per scene in bold."""
+    shown = display_table(s).drop(columns=["complete"])
+    best = s.groupby("scene").success_rate.transform("max")
+    esc = (lambda text: str(text).replace("_", r"\_").replace("%", r"\%").replace("–", "--"))
+    lines = [r"\begin{tabular}{ll" + "r" * (shown.shape[1] - 2) + "}", r"\toprule",
+             " & ".join(esc(c) for c in shown.columns) + r" \\", r"\midrule"]
+    previous = None
+    for i, row in shown.iterrows():
+        if previous is not None and row.scene != previous:
+            lines.append(r"\midrule")
+        previous = row.scene
+        cells = [esc(v) for v in row]
+        if not pd.isna(s.success_rate[i]) and s.success_rate[i] == best[i]:
+            cells[3] = r"\textbf{" + cells[3] + "}"
+        lines.append(" & ".join(cells) + r" \\")
+    lines += [r"\bottomrule", r"\end{tabular}", ""]
+    return "\n".join(lines)
+
+
+def write_report(out_dir: Path, figures: bool = True) -> dict:
+    """Write every table and figure of the latest experiment in ``out_dir``; returns the
+    summary and comparisons for printing."""
+    out_dir = Path(out_dir)
+    data = load(out_dir)
+    s = summary(data)
+    comp = comparisons(data, seed=int(data["config"]["seed"]))
+    cal, bins = calibration(data)
+    fails = failures(data)
+    s.to_csv(out_dir / "summary.csv", index=False)
+    comp.to_csv(out_dir / "comparisons.csv", index=False)
+    cal.to_csv(out_dir / "calibration.csv", index=False)
+    bins.to_csv(out_dir / "reliability.csv", index=False)
+    fails.to_csv(out_dir / "failures.csv", index=False)
+    md = ["# " + data["config"]["name"], "", display_table(s).to_markdown(index=False), "",
+          "## Paired comparisons (success difference, posterior samples)", ""]
+    if not comp.empty:
+        shown = comp[comp.shapes == "posterior"].copy()
+        shown["difference [95% CI]"] = [f"{d:+.3f} [{lo:+.3f}, {hi:+.3f}]"
+                                        for d, lo, hi in zip(shown.difference, shown.ci_low, shown.ci_high)]
+        shown["McNemar p"] = shown.mcnemar_p.map(lambda p: f"{p:.3g}")
+        md.append(shown[["scene", "planner", "versus", "pairs", "difference [95% CI]", "McNemar p"]]
+                  .to_markdown(index=False))
+    md += ["", "## Calibration of analytic P_F against physical success", "",
+           cal.to_markdown(index=False, floatfmt=".3f") if not cal.empty else "(no executed plans)", "",
+           "## Trial outcomes", "", fails.to_markdown(index=False), ""]
+    (out_dir / "summary.md").write_text("\n".join(md))
+    (out_dir / "summary.tex").write_text(_latex(s))
+    for table in ("trials", "plans"):
+        data[table].to_parquet(out_dir / f"{table}.parquet", index=False)
+    runs = data["runs"]
+    manifest = {"config": data["config"], "config_hash": data["hash"], **data["environment"],
+                "started": runs.started.iloc[0], "ended": runs.ended.iloc[-1],
+                "invocations": runs[["started", "ended", "status"]].to_dict("records")}
+    (out_dir / "manifest.json").write_text(json.dumps(manifest, indent=2, default=str) + "\n")
+    if figures:
+        from harness import plots
+
+        plots.report_figures(out_dir, data, s, bins, fails)
+    return {"summary": s, "comparisons": comp, "calibration": cal}
