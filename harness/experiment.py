@@ -94,6 +94,11 @@ class ExperimentConfig:
     def as_dict(self) -> dict:
         return asdict(self)
 
+    @classmethod
+    def from_dict(cls, d: dict) -> "ExperimentConfig":
+        """The inverse of as_dict (the ledger keeps the config as JSON)."""
+        return cls(**{**d, "scenes": tuple(d["scenes"]), "planners": tuple(PlannerEntry(**p) for p in d["planners"])})
+
     @property
     def scene_overrides(self) -> dict:
         return {"gripper": dict(self.gripper)} if self.gripper else {}

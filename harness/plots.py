@@ -219,7 +219,7 @@ def report_figures(out_dir, data, summary, bins, fails) -> list:
     from pathlib import Path
 
     from harness.belief import build_belief
-    from harness.experiment import scene_of
+    from harness.experiment import ExperimentConfig, scene_of
     from harness.seeding import stream
 
     folder = Path(out_dir) / "figures"
@@ -237,7 +237,7 @@ def report_figures(out_dir, data, summary, bins, fails) -> list:
     if not fails.empty:
         save(failures_figure(fails), "failures.png")
     save(calibration_figure(bins), "calibration.png")
-    config = _config_view(data["config"])
+    config = ExperimentConfig.from_dict(data["config"])
     plans = data["plans"]
     for path in config.scenes:
         scene = scene_of(config, path)
@@ -246,23 +246,10 @@ def report_figures(out_dir, data, summary, bins, fails) -> list:
         grasps = {}
         for entry in config.planners:
             row = rows.loc[entry.label] if entry.label in rows.index else None
-            ok = row is not None and not pd_isna(row.g1x)
+            ok = row is not None and row.g1x == row.g1x and row.g1x is not None  # NULL reads as NaN or None
             grasps[entry.label] = ((row.g1x, row.g1y), (row.g2x, row.g2y)) if ok else None
         fig = grasps_figure(belief, grasps, stream(config.seed, scene.name, 0, "blur"),
                             title=f"{scene.name}, realisation 0: GPIS-Blur and the planners' grasps\n"
                                   "blue dashed: true shape; bars: jaw plates at their start points")
         save(fig, f"grasps-{scene.name}.png")
     return written
-
-
-def pd_isna(value) -> bool:
-    return value is None or (isinstance(value, float) and np.isnan(value))
-
-
-def _config_view(config: dict):
-    from harness.experiment import ExperimentConfig, PlannerEntry
-
-    d = dict(config)
-    d["planners"] = tuple(PlannerEntry(**p) for p in d["planners"])
-    d["scenes"] = tuple(d["scenes"])
-    return ExperimentConfig(**d)

@@ -38,6 +38,16 @@ def available() -> tuple[dict, dict]:
 
 
 def planner_class(name: str) -> type:
+    """The class registered as ``name``, or, for ``module:Class``, that class imported
+    directly (a planner under development needs no packaging)."""
+    if ":" in name:
+        try:
+            cls = _load(name)
+        except (ImportError, AttributeError, ValueError) as exc:
+            raise InputError("--planner", None, f"cannot import planner '{name}': {exc}") from None
+        if not (isinstance(cls, type) and issubclass(cls, Planner)):
+            raise InputError("--planner", None, f"'{name}' is not a Planner subclass")
+        return cls
     found, broken = available()
     if name not in found:
         extra = f"; {name} failed to load: {broken[name]}" if name in broken else ""

@@ -1,0 +1,278 @@
+"""Experiments end to end: config validation, eval and report on a tiny experiment,
+independence from workers and executor, resume after kill -9, faulty planners."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from harness.cli import main
+from harness.experiment import load_config
+from harness.report import SUMMARY_COLUMNS
+
+ROOT = Path(__file__).resolve().parent.parent
+TIMING = ["plan_time_median_s"]
+
+TINY = """
+name = "tiny"
+seed = 3
+scenes = ["rectangle"]
+realisations = 2
+
+[evaluation]
+analytic_draws = 100
+posterior_trials = 6
+truth_trials = 2
+time_budget_s = 20.0
+
+[physics]
+batch_size = 4
+
+[[planners]]
+name = "mean-shape"
+params = { candidates = 20 }
+
+[[planners]]
+name = "gp-p"
+params = { candidates = 20, samples = 100 }
+
+[[planners]]
+name = "gp-gpis-opt"
+label = "opt"
+params = { initialisations = 3, screen = 20, rerank_samples = 50 }
+"""
+
+
+def _write(tmp_path: Path, text: str, name: str = "tiny.toml") -> Path:
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+def _eval(config: Path, out: Path, *extra: str) -> int:
+    return main(["eval", str(config), "--out", str(out), *extra])
+
+
+def _tables(out: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
+    summary = pd.read_csv(out / "summary.csv").drop(columns=TIMING)
+    trials = pd.read_parquet(out / "trials.parquet").sort_values(
+        ["scene", "realisation", "planner", "shapes", "trial"]).reset_index(drop=True)
+    return summary, trials
+
+
+@pytest.fixture(scope="module")
+def tiny_run(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("tiny")
+    config = _write(tmp, TINY)
+    out = tmp / "out"
+    assert _eval(config, out, "--workers", "2") == 0
+    return config, out
+
+
+def test_eval_writes_every_table_and_figure(tiny_run, capsys):
+    config, out = tiny_run
+    for name in ("summary.csv", "summary.md", "summary.tex", "trials.parquet", "plans.parquet", "manifest.json",
+                 "comparisons.csv", "calibration.csv", "figures/success.png", "figures/failures.png",
+                 "figures/calibration.png", "figures/grasps-rectangle.png"):
+        assert (out / name).is_file(), name
+    summary = pd.read_csv(out / "summary.csv")
+    assert list(summary.columns[:len(SUMMARY_COLUMNS)]) == SUMMARY_COLUMNS
+    assert summary.complete.all()
+    # Every expected trial is there once: 2 realisations x 3 planners x (6 + 2).
+    trials = pd.read_parquet(out / "trials.parquet")
+    assert len(trials) == 2 * 3 * 8
+    assert not trials.duplicated(["scene", "realisation", "planner", "shapes", "trial"]).any()
+    # The summary's rates are the trials' own counts, and Wilson intervals bracket them.
+    post = trials[(trials.planner == "gp-p") & (trials.shapes == "posterior") & (trials.scene == "rectangle")]
+    row = summary[(summary.scene == "rectangle") & (summary.planner == "gp-p")].iloc[0]
+    assert row.n_trials == 12
+    assert row.success_rate == pytest.approx((post.outcome == "success").mean(), abs=1e-12)
+    assert row.success_ci_low <= row.success_rate <= row.success_ci_high
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["config_hash"] == load_config(config).hash and manifest["packages"]["pybullet"]
+    tex = (out / "summary.tex").read_text()
+    assert r"\toprule" in tex and r"\textbf{" in tex
+
+
+def test_pairing_same_shapes_and_noise_for_every_planner(tiny_run):
+    """Common random numbers: a plan's trial i used shape sample i and noise draw i, the
+    same for every planner, so when two planners return the same grasp their trials agree
+    outcome for outcome."""
+    _, out = tiny_run
+    plans = pd.read_parquet(out / "plans.parquet")
+    trials = pd.read_parquet(out / "trials.parquet")
+    comp = pd.read_csv(out / "comparisons.csv")
+    for (scene, r), group in plans.groupby(["scene", "realisation"]):
+        grasps = {p.planner: (p.g1x, p.g1y, p.g2x, p.g2y) for p in group.itertuples()}
+        for a in grasps:
+            for b in grasps:
+                if a < b and np.allclose(grasps[a], grasps[b], atol=1e-12):
+                    ta = trials[(trials.planner == a) & (trials.realisation == r)].sort_values(["shapes", "trial"])
+                    tb = trials[(trials.planner == b) & (trials.realisation == r)].sort_values(["shapes", "trial"])
+                    assert list(ta.outcome) == list(tb.outcome)
+    # McNemar and the paired difference agree with the discordant counts.
+    row = comp[(comp.scene == "all") & (comp.shapes == "posterior")].iloc[0]
+    assert row.difference == pytest.approx((row.only_planner - row.only_versus) / row.pairs)
+
+
+def test_results_do_not_depend_on_workers_or_executor(tiny_run, tmp_path):
+    config, out2 = tiny_run
+    reference = _tables(out2)
+    for extra in (["--workers", "1"], ["--workers", "2", "--scheduler", "local"]):
+        out = tmp_path / extra[-1]
+        assert _eval(config, out, *extra, "--no-report") == 0
+        assert main(["report", str(out), "--no-figures"]) == 0
+        summary, trials = _tables(out)
+        pd.testing.assert_frame_equal(summary, reference[0])
+        pd.testing.assert_frame_equal(trials, reference[1])
+
+
+def test_resume_after_kill_gives_the_uninterrupted_tables(tiny_run, tmp_path):
+    config, reference_out = tiny_run
+    reference = _tables(reference_out)
+    out = tmp_path / "killed"
+    rng = np.random.default_rng(5)
+    command = [sys.executable, "-m", "harness", "eval", str(config), "--out", str(out), "--workers", "2",
+               "--no-report"]
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    for delay in rng.uniform(2.0, 6.0, size=3):
+        proc = subprocess.Popen(command, cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                                start_new_session=True)
+        time.sleep(delay)
+        os.killpg(proc.pid, signal.SIGKILL)  # the main process and its workers, as a crash would
+        proc.wait()
+    assert subprocess.run(command, cwd=ROOT, env=env, capture_output=True, check=False).returncode == 0
+    assert main(["report", str(out), "--no-figures"]) == 0
+    summary, trials = _tables(out)
+    pd.testing.assert_frame_equal(summary, reference[0])
+    pd.testing.assert_frame_equal(trials, reference[1])
+
+
+def test_faulty_planners_are_recorded_and_the_run_completes(tmp_path):
+    text = TINY.replace("realisations = 2", "realisations = 1").replace("time_budget_s = 20.0",
+                                                                       "time_budget_s = 0.5")
+    text = text[:text.index("[[planners]]")] + "".join(
+        f'[[planners]]\nname = "faulty_planners:{cls}"\nlabel = "{label}"\n\n'
+        for cls, label in (("Raises", "raises"), ("ReturnsNaN", "nan"), ("OutsideGrid", "outside"),
+                           ("Sleeps", "sleeps")))
+    text += '[[planners]]\nname = "mean-shape"\nparams = { candidates = 20 }\n'
+    out = tmp_path / "out"
+    assert _eval(_write(tmp_path, text), out, "--workers", "1") == 0
+    plans = pd.read_parquet(out / "plans.parquet").set_index("planner")
+    assert plans.loc["raises", "status"] == "raised" and "deliberate failure" in plans.loc["raises", "message"]
+    assert plans.loc["nan", "status"] == "invalid"
+    assert plans.loc["outside", "status"] == "invalid"
+    assert plans.loc["sleeps", "status"] == "overtime"
+    assert plans.loc["mean-shape", "status"] == "ok"
+    trials = pd.read_parquet(out / "trials.parquet")
+    failed = trials[trials.planner != "mean-shape"]
+    assert len(failed) == 4 * 8 and (failed.outcome == "no_plan").all()
+    summary = pd.read_csv(out / "summary.csv")
+    assert summary.complete.all()
+    assert (summary[summary.planner != "mean-shape"].success_rate == 0).all()
+
+
+BAD_CONFIGS = [
+    ("seed = -1", "seed"),
+    ("seed = 1\nscenes = []", "scenes"),
+    ('scenes = ["no_such_scene"]', "scenes[0]"),
+    ("realisations = 0", "realisations"),
+    ('[[planners]]\nname = "no-such-planner"', "planners[0].name"),
+    ('[[planners]]\nname = "gp-p"\nparams = { candidates = "many" }', "planners[0].params.candidates"),
+    ('[[planners]]\nname = "gp-p"\nparams = { wings = 2 }', "planners[0].params.wings"),
+    ('[evaluation]\nposterior_trials = 1.5\n[[planners]]\nname = "gp-p"', "evaluation.posterior_trials"),
+    ('[physics]\ntime_step = 0.5\n[[planners]]\nname = "gp-p"', "physics.time_step"),
+    ('colour = "red"\n[[planners]]\nname = "gp-p"', "colour"),
+    ('[[planners]]\nname = "gp-p"\n[[planners]]\nname = "gp-p"', "planners[1].label"),
+    ("this is not toml", None),
+]
+
+
+@pytest.mark.parametrize(("text", "field"), BAD_CONFIGS)
+def test_bad_configs_get_one_line_naming_the_field(tmp_path, capsys, text, field):
+    path = _write(tmp_path, text, "bad.toml")
+    assert _eval(path, tmp_path / "out") == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and err.startswith(f"gpis-harness: error: {path}"), err
+    if field:
+        assert f": {field}:" in err, err
+    assert not (tmp_path / "out").exists()  # nothing started
+
+
+def _toml_value(value) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, (int, float)):
+        return repr(value) if np.isfinite(value) else ("nan" if value != value else ("inf" if value > 0 else "-inf"))
+    if isinstance(value, str):
+        return json.dumps(value)
+    return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+
+
+_values = st.one_of(st.integers(-10**6, 10**6), st.floats(allow_nan=True, allow_infinity=True), st.booleans(),
+                    st.text(max_size=12), st.lists(st.integers(-3, 3) | st.text(max_size=5), max_size=3))
+_keys = st.sampled_from(["seed", "scenes", "realisations", "name", "evaluation.analytic_draws",
+                         "evaluation.posterior_trials", "evaluation.truth_trials", "evaluation.sigma_g",
+                         "evaluation.friction", "evaluation.time_budget_s", "physics.time_step",
+                         "physics.solver_iterations", "physics.batch_size", "gripper.opening", "gripper.force",
+                         "planners.name", "planners.params.candidates", "bogus"])
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(changes=st.dictionaries(_keys, _values, min_size=1, max_size=3))
+def test_fuzzed_configs_run_or_get_one_line(tmp_path, capsys, changes):
+    """Whatever a config holds, loading it either succeeds or is exit 2 with one line."""
+    tables: dict = {"": {}, "evaluation": {}, "physics": {}, "gripper": {}}
+    planner = {"name": "gp-p"}
+    for key, value in changes.items():
+        if key.startswith("planners."):
+            planner[key.split(".", 1)[1]] = value
+        elif "." in key:
+            table, field = key.split(".")
+            tables[table][field] = value
+        else:
+            tables[""][key] = value
+    lines = [f"{k} = {_toml_value(v)}" for k, v in tables[""].items()]
+    for table in ("evaluation", "physics", "gripper"):
+        lines += [f"[{table}]"] + [f"{k} = {_toml_value(v)}" for k, v in tables[table].items()]
+    params = {k.split(".", 1)[1]: v for k, v in planner.items() if k.startswith("params.")}
+    lines += ["[[planners]]", f"name = {_toml_value(planner['name'])}"]
+    if params:
+        lines.append("params = { " + ", ".join(f"{k} = {_toml_value(v)}" for k, v in params.items()) + " }")
+    path = tmp_path / "fuzz.toml"
+    path.write_text("\n".join(lines) + "\n")
+    capsys.readouterr()
+    try:
+        load_config(path)
+    except Exception as exc:  # noqa: BLE001 - the assertion is on the kind of error
+        from harness.errors import InputError
+
+        assert isinstance(exc, InputError), f"{type(exc).__name__}: {exc}"
+        assert "\n" not in str(exc) and str(exc).startswith(str(path))
+
+
+def test_corrupt_or_foreign_ledger_is_one_line_exit_2(tmp_path, capsys):
+    import sqlite3
+
+    config = _write(tmp_path, TINY)
+    for name, make in (("garbage", lambda p: p.write_bytes(b"this is not sqlite" * 100)),
+                       ("foreign", lambda p: sqlite3.connect(p).execute("CREATE TABLE t (x)").connection.commit())):
+        out = tmp_path / name
+        out.mkdir()
+        make(out / "ledger.sqlite")
+        assert _eval(config, out) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and "ledger.sqlite" in err, err
+        assert main(["report", str(out)]) == 2
+        assert len(capsys.readouterr().err.strip().splitlines()) == 1
