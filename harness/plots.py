@@ -209,8 +209,52 @@ def calibration_figure(bins):
     ax.set_aspect("equal")
     ax.set_xlabel("analytic P_F of the plan")
     ax.set_ylabel("physical success on posterior samples")
-    ax.legend(fontsize=8, loc="upper left")
+    ax.legend(fontsize=8, loc="lower right")
     ax.set_title("Calibration (numbers: plans per bin)", fontsize=10)
+    return fig
+
+
+def convergence_figure(bench: dict):
+    """Like the supplement's Fig. 1 (from ``bench planning``): the analytic P_F of gp-p's
+    best grasp so far against its planning time (steps), and of gp-gpis-opt's answer for
+    runs with 1, 2, 3, 5 and 10 initialisations against their time (points); one line per
+    seed."""
+    from harness.bench import CONVERGENCE_SCENE
+
+    fig, ax = plt.subplots(figsize=(6.0, 4.2), constrained_layout=True)
+    for k, run in enumerate(bench["convergence"]):
+        gpp = np.asarray(run.get("gp-p", []), dtype=float)
+        opt = np.asarray(run.get("gp-gpis-opt", []), dtype=float)
+        if len(gpp):
+            ax.step(gpp[:, 0], gpp[:, 2], where="post", color="tab:blue", alpha=0.8,
+                    label="gp-p (best of the candidates so far)" if k == 0 else None)
+        if len(opt):
+            ax.plot(opt[:, 0], opt[:, 2], "o-", color="tab:red", alpha=0.8, ms=4,
+                    label="gp-gpis-opt (1, 2, 3, 5, 10 initialisations)" if k == 0 else None)
+    ax.set_xlabel("planning time (s)")
+    ax.set_ylabel("analytic P_F of the grasp (1000 draws)")
+    ax.legend(fontsize=8, loc="lower right")
+    ax.set_title(f"Convergence on the {CONVERGENCE_SCENE} (bench planning; one line per seed)", fontsize=10)
+    return fig
+
+
+def runtime_figure(bench: dict):
+    """Like the supplement's Fig. 2: time per SCP initialisation and per GP-P candidate,
+    and per P_F estimate, against the grid size M (log-log)."""
+    fig, ax = plt.subplots(figsize=(6.0, 4.2), constrained_layout=True)
+    for key, label, colour in (("scp_s_per_init", "GP-GPIS-OPT: one SCP initialisation", "tab:red"),
+                               ("gpp_s_per_candidate", "GP-P: one candidate (1000 samples)", "tab:blue")):
+        sizes = sorted(int(m) for m in bench.get(key, {}))
+        if sizes:
+            ax.loglog(sizes, [bench[key][str(m)] for m in sizes], "o-", color=colour, label=label)
+    rows = bench.get("rows", [])
+    if rows:
+        ax.loglog([r["M"] for r in rows], [r["p_f_s"] for r in rows], "s--", color="0.4",
+                  label="one P_F estimate (1000 draws)")
+    ax.set_xlabel("grid size M (cells per side)")
+    ax.set_ylabel("seconds")
+    ax.legend(fontsize=8)
+    ax.set_title("Runtime against grid size (bench planning)", fontsize=10)
     return fig
 
 
@@ -237,6 +281,14 @@ def report_figures(out_dir, data, summary, bins, fails) -> list:
     if not fails.empty:
         save(failures_figure(fails), "failures.png")
     save(calibration_figure(bins), "calibration.png")
+    bench_file = Path(out_dir) / "bench-planning.json"
+    if bench_file.is_file():  # written by: gpis-harness bench planning --json > DIR/bench-planning.json
+        import json
+
+        bench = json.loads(bench_file.read_text())
+        if bench.get("convergence"):
+            save(convergence_figure(bench), "convergence.png")
+        save(runtime_figure(bench), "runtime.png")
     config = ExperimentConfig.from_dict(data["config"])
     plans = data["plans"]
     for path in config.scenes:

@@ -154,7 +154,9 @@ def calibration(data: dict) -> tuple[pd.DataFrame, pd.DataFrame]:
         # Brier over trials: each trial's forecast is its plan's P_F.
         brier = float((((g.p_f ** 2) * (g["count"] - g["sum"]) + ((1 - g.p_f) ** 2) * g["sum"]).sum())
                       / g["count"].sum())
-        rho = stats.spearmanr(g.p_f, g["sum"] / g["count"]).statistic if len(g) > 2 else np.nan
+        rate = g["sum"] / g["count"]
+        varied = len(g) > 2 and g.p_f.nunique() > 1 and rate.nunique() > 1  # else undefined
+        rho = stats.spearmanr(g.p_f, rate).statistic if varied else np.nan
         rows.append({"planner": planner, "plans": len(g), "brier": brier, "spearman": float(rho),
                      "mean_p_f": float(g.p_f.mean()), "success_rate": float(g["sum"].sum() / g["count"].sum())})
     edges = np.linspace(0, 1, RELIABILITY_BINS + 1)

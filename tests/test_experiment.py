@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import os
 import signal
+import sqlite3
 import subprocess
 import sys
 import time
@@ -103,6 +104,13 @@ def test_eval_writes_every_table_and_figure(tiny_run, capsys):
     assert manifest["config_hash"] == load_config(config).hash and manifest["packages"]["pybullet"]
     tex = (out / "summary.tex").read_text()
     assert r"\toprule" in tex and r"\textbf{" in tex
+    # With benchmark data in the folder, the report adds the convergence and runtime figures.
+    bench = {"convergence": [{"seed": 0, "gp-p": [[0.1, 10, 0.5], [0.2, 20, 0.7]], "gp-gpis-opt": [[0.05, 1, 0.6]]}],
+             "scp_s_per_init": {"25": 0.02, "50": 0.02}, "gpp_s_per_candidate": {"25": 0.01, "50": 0.02},
+             "rows": [{"M": 25, "p_f_s": 0.01}, {"M": 50, "p_f_s": 0.01}]}
+    (out / "bench-planning.json").write_text(json.dumps(bench))
+    assert main(["report", str(out)]) == 0
+    assert (out / "figures" / "convergence.png").is_file() and (out / "figures" / "runtime.png").is_file()
 
 
 def test_pairing_same_shapes_and_noise_for_every_planner(tiny_run):
@@ -146,12 +154,17 @@ def test_resume_after_kill_gives_the_uninterrupted_tables(tiny_run, tmp_path):
     command = [sys.executable, "-m", "harness", "eval", str(config), "--out", str(out), "--workers", "2",
                "--no-report"]
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    for delay in rng.uniform(2.0, 6.0, size=3):
+    counts = []
+    for delay in rng.uniform(1.5, 4.0, size=3):
         proc = subprocess.Popen(command, cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                                 start_new_session=True)
         time.sleep(delay)
         os.killpg(proc.pid, signal.SIGKILL)  # the main process and its workers, as a crash would
         proc.wait()
+        if (out / "ledger.sqlite").exists():
+            with sqlite3.connect(out / "ledger.sqlite") as db:
+                counts.append(db.execute("SELECT COUNT(*) FROM trials").fetchone()[0])
+    assert counts == sorted(counts) and counts and counts[0] < len(reference[1])  # killed mid-run, nothing lost
     assert subprocess.run(command, cwd=ROOT, env=env, capture_output=True, check=False).returncode == 0
     assert main(["report", str(out), "--no-figures"]) == 0
     summary, trials = _tables(out)
@@ -263,8 +276,6 @@ def test_fuzzed_configs_run_or_get_one_line(tmp_path, capsys, changes):
 
 
 def test_corrupt_or_foreign_ledger_is_one_line_exit_2(tmp_path, capsys):
-    import sqlite3
-
     config = _write(tmp_path, TINY)
     for name, make in (("garbage", lambda p: p.write_bytes(b"this is not sqlite" * 100)),
                        ("foreign", lambda p: sqlite3.connect(p).execute("CREATE TABLE t (x)").connection.commit())):
