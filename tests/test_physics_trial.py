@@ -4,11 +4,13 @@ calibration grasps, the unstable outcome, and determinism. The large counts live
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
 from harness.physics.simulate import make_trials, truth_polygon
-from harness.physics.trial import Protocol, Runner, Trial, approach_blocked
+from harness.physics.trial import Protocol, Runner, Trial, approach_blocked, free_travel
 from harness.scene import load_scene
 
 
@@ -30,6 +32,19 @@ def test_approach_collision_matches_the_rectangle_closed_form():
         assert blocked == expected, (x1, x2, y)
 
 
+def test_free_travel_matches_the_rectangle_closed_form():
+    # The 0.06 m x 0.03 m rectangle: a plate at x1 < -0.03 first meets the face x = -0.03,
+    # unless its width misses the rectangle (|y| >= 0.015 + jaw_width / 2).
+    rng = np.random.default_rng(6)
+    half_pad = 0.5 * _rectangle_trial((-0.05, 0.0), (0.05, 0.0)).gripper.pad_width
+    for _ in range(200):
+        x1, x2 = -rng.uniform(0.03, 0.05), rng.uniform(0.03, 0.05)
+        y = rng.uniform(-0.025, 0.025)
+        travel = free_travel(_rectangle_trial((x1, y), (x2, y)))
+        if abs(y) < 0.015 + half_pad - 1e-9:
+            assert travel == pytest.approx(min(-0.03 - x1, x2 - 0.03), abs=1e-12), (x1, x2, y)
+        else:
+            assert travel == math.inf
 
 
 def test_the_calibration_grasps_on_the_rectangle():

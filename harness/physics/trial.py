@@ -68,6 +68,7 @@ class Protocol:
     closing_slack: float = 0.5       # s allowed beyond the time to close fully
     max_speed: float = 10.0          # m/s: faster means the simulation blew up
     max_spin: float = 200.0          # rad/s: likewise
+    skip_free_travel: bool = True    # start the jaws SKIP_MARGIN short of the first contact
 
     def steps(self, seconds: float) -> int:
         return max(1, int(round(seconds / self.time_step)))
@@ -129,6 +130,23 @@ def pad_footprints(trial: Trial) -> list[Polygon]:
 def approach_blocked(trial: Trial) -> bool:
     """Whether a jaw pad would come down on the object (overlap of positive area)."""
     return any(shapely.intersection(pad, trial.polygon).area > 0.0 for pad in pad_footprints(trial))
+
+
+def free_travel(trial: Trial) -> float:
+    """How far both jaws can close together before either plate touches the object: the
+    gap between each plate's face and the object within the plate's width, the smaller
+    of the two (infinite when nothing lies between the plates)."""
+    u = np.asarray(trial.axis, dtype=float)
+    v = np.array([-u[1], u[0]])
+    g1, g2 = np.asarray(trial.g1, dtype=float), np.asarray(trial.g2, dtype=float)
+    width = float(np.dot(g2 - g1, u))
+    half = 0.5 * trial.gripper.pad_width
+    strip = Polygon([g1 - half * v, g2 - half * v, g2 + half * v, g1 + half * v])
+    between = shapely.intersection(strip, trial.polygon)
+    if between.is_empty or between.area <= 0.0:
+        return math.inf
+    along = np.asarray(shapely.get_coordinates(between)) @ u - float(np.dot(g1, u))
+    return max(0.0, min(float(along.min()), width - float(along.max())))
 
 
 class Runner:
@@ -268,6 +286,10 @@ class _Slot:
             pb.changeDynamics(self.grip, link, lateralFriction=t.friction, frictionAnchor=int(p.friction_anchor),
                               physicsClientId=c)
             pb.setCollisionFilterPair(self.grip, self.runner.table, link, -1, 0, physicsClientId=c)
+        # Free travel is skipped: both jaws start SKIP_MARGIN short of the first contact,
+        # which they would have reached at the same moment, with nothing yet touched.
+        skip = max(0.0, min(free_travel(t), 0.5 * width) - SKIP_MARGIN) if p.skip_free_travel else 0.0
+        width -= 2 * skip
         limits = []
         for jaw, joint in enumerate(g.finger_joints):
             q0 = g.joint_position(jaw, (-0.5 if jaw == 0 else 0.5) * width)
@@ -446,6 +468,10 @@ class _Slot:
         pb.removeBody(self.grip, physicsClientId=c)
         pb.removeBody(self.obj, physicsClientId=c)
 
+
+#: With skip_free_travel, the closing jaws start this far short of the first contact (m),
+#: time enough to reach the closing speed (in under a step) before touching.
+SKIP_MARGIN = 0.002
 
 #: The jaws' lower edges start this far above the table (m).
 _TABLE_GAP = 0.001
