@@ -43,8 +43,10 @@ HARD_STOP_FACTOR = 3.0           # a planner still running at 3 x budget + 10 s 
 HARD_STOP_EXTRA_S = 10.0
 SHAPES = ("posterior", "truth")
 
-_PROTOCOL_KEYS = ("time_step", "solver_iterations", "lift_height", "lift_time", "hold_time", "shake_time",
-                  "shake_frequency", "shake_amplitude", "shake_turn", "table_friction")
+#: Protocol fields a config may override: whether zero is allowed (else strictly positive).
+_PROTOCOL_KEYS = {"time_step": False, "lift_height": False, "lift_time": False, "hold_time": True,
+                  "shake_time": True, "shake_frequency": False, "shake_amplitude": True, "shake_turn": True,
+                  "table_friction": True}
 _GRIPPER_KEYS = ("opening", "jaw_width", "sigma_g", "force", "closing_speed", "plate_height")
 
 
@@ -146,13 +148,10 @@ def parse_config(data: dict, source: str, base_dir: Path, default_name: str = "e
     gripper_t.finish()
 
     phys = root.table("physics", required=False)
-    protocol = {}
-    for key in _PROTOCOL_KEYS:
-        if key in phys.data:
-            protocol[key] = (phys.integer(key, None, lo=1, hi=10_000) if key == "solver_iterations"
-                             else phys.number(key, None, lo=0.0, lo_open=key not in ("shake_turn", "table_friction",
-                                                                                     "shake_amplitude",
-                                                                                     "hold_time", "shake_time")))
+    protocol = {key: phys.number(key, None, lo=0.0, lo_open=not zero_ok)
+                for key, zero_ok in _PROTOCOL_KEYS.items() if key in phys.data}
+    if "solver_iterations" in phys.data:
+        protocol["solver_iterations"] = phys.integer("solver_iterations", None, lo=1, hi=10_000)
     if "time_step" in protocol and protocol["time_step"] > 0.01:
         raise phys.error("time_step", f"{protocol['time_step']} s is too coarse (at most 0.01 s)")
     batch = phys.integer("batch_size", 16, lo=1, hi=64)
@@ -271,7 +270,8 @@ def run_cell(config: ExperimentConfig, path: str, realisation: int, labels: tupl
         plans.append(row)
         if row["executed"]:
             grasp = np.array([[row["g1x"], row["g1y"]], [row["g2x"], row["g2y"]]])
-            est = _analytic(grasp, draws, config, sigma_g, friction, scene, evaluate_draws)
+            est = evaluate_draws(grasp, draws.first(config.analytic_draws), sigma_g, friction,
+                                 scene.gripper.opening, scene.gripper.jaw_width, config.friction_spread).estimates[0]
             analytic.append({"scene": name, "realisation": realisation, "planner": entry.label,
                              "draws": est.samples, "p_f": est.p_f, "ci_low": est.ci_low, "ci_high": est.ci_high,
                              "ferrari_canny_mean": est.ferrari_canny_mean,
@@ -283,19 +283,6 @@ def run_cell(config: ExperimentConfig, path: str, realisation: int, labels: tupl
     truth_friction = stream(config.seed, name, realisation, "truth-friction").standard_normal(config.truth_trials)
     return CellResult(name, realisation, plans, analytic, polygons, draws.approach[:k].copy(),
                       draws.friction[:k].copy(), truth_approach, truth_friction, time.perf_counter() - start)
-
-
-def _analytic(grasp, draws, config, sigma_g, friction, scene, evaluate_draws):
-    """P_F on the first ``analytic_draws`` draws (the draws may be more, for the trials)."""
-    m = config.analytic_draws
-    if len(draws) > m:
-        from harness.grasp import SDFBatch
-
-        draws = replace(draws, shapes=SDFBatch(draws.shapes.grid, draws.shapes.values[:m],
-                                               draws.shapes.gradients[:m]),
-                        approach=draws.approach[:m], friction=draws.friction[:m])
-    return evaluate_draws(grasp, draws, sigma_g, friction, scene.gripper.opening, scene.gripper.jaw_width,
-                          config.friction_spread).estimates[0]
 
 
 class _Overtime(Exception):
@@ -405,9 +392,8 @@ def run_batch(config: ExperimentConfig, batch: Batch) -> list[dict]:
             for i, r in zip(batch.indices, results, strict=True)]
 
 
-def _trial_row(batch_or_key, index: int, outcome: str, steps: int = 0, grip_width=None, closing_turn=None,
+def _trial_row(b: Batch, index: int, outcome: str, steps: int = 0, grip_width=None, closing_turn=None,
                rise=None, pivot=None) -> dict:
-    b = batch_or_key
 
     def num(v):
         return None if v is None or not math.isfinite(v) else float(v)

@@ -114,6 +114,12 @@ class SDFBatch:
     def __len__(self) -> int:
         return len(self.values)
 
+    def first(self, n: int) -> "SDFBatch":
+        """The first n fields (views, no copies)."""
+        out = object.__new__(SDFBatch)
+        out.grid, out.values, out.gx, out.gy = self.grid, self.values[:n], self.gx[:n], self.gy[:n]
+        return out
+
     @cached_property
     def twist(self) -> np.ndarray:
         """Cross derivative d2f/dxdy (F, M, M): the average of d(df/dx)/dy and

@@ -49,6 +49,12 @@ class EvaluationDraws:
     def __len__(self) -> int:
         return len(self.approach)
 
+    def first(self, n: int) -> "EvaluationDraws":
+        """The first n paired draws (all of them when there are fewer)."""
+        if n >= len(self):
+            return self
+        return EvaluationDraws(self.shapes.first(n), self.approach[:n], self.friction[:n], self.torque_scale)
+
 
 def draw_evaluation(belief: Belief, n: int, shapes_rng: np.random.Generator,
                     approach_rng: np.random.Generator, friction_rng: np.random.Generator) -> EvaluationDraws:

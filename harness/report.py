@@ -256,7 +256,9 @@ def write_report(out_dir: Path, figures: bool = True) -> dict:
     runs = data["runs"]
     manifest = {"config": data["config"], "config_hash": data["hash"], **data["environment"],
                 "started": runs.started.iloc[0], "ended": runs.ended.iloc[-1],
-                "invocations": runs[["started", "ended", "status"]].to_dict("records")}
+                "invocations": [{"started": r.started, "ended": r.ended, "status": r.status,
+                                 "git_commit": json.loads(r.environment).get("git_commit")}
+                                for r in runs.itertuples()]}
     (out_dir / "manifest.json").write_text(json.dumps(manifest, indent=2, default=str) + "\n")
     if figures:
         from harness import plots

@@ -173,8 +173,10 @@ def test_resume_after_kill_gives_the_uninterrupted_tables(tiny_run, tmp_path):
 
 
 def test_faulty_planners_are_recorded_and_the_run_completes(tmp_path):
+    # Fewer analytic draws than posterior trials: P_F uses the first 4 of the 6 paired draws.
     text = TINY.replace("realisations = 2", "realisations = 1").replace("time_budget_s = 20.0",
                                                                        "time_budget_s = 0.5")
+    text = text.replace("analytic_draws = 100", "analytic_draws = 4")
     text = text[:text.index("[[planners]]")] + "".join(
         f'[[planners]]\nname = "faulty_planners:{cls}"\nlabel = "{label}"\n\n'
         for cls, label in (("Raises", "raises"), ("ReturnsNaN", "nan"), ("OutsideGrid", "outside"),
@@ -194,6 +196,9 @@ def test_faulty_planners_are_recorded_and_the_run_completes(tmp_path):
     summary = pd.read_csv(out / "summary.csv")
     assert summary.complete.all()
     assert (summary[summary.planner != "mean-shape"].success_rate == 0).all()
+    assert len(plans) == 5
+    with sqlite3.connect(out / "ledger.sqlite") as db:  # only mean-shape's plan was judged, on 4 draws
+        assert db.execute("SELECT planner, draws FROM analytic").fetchall() == [("mean-shape", 4)]
 
 
 BAD_CONFIGS = [
