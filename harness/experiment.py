@@ -180,7 +180,11 @@ def parse_config(data: dict, source: str, base_dir: Path, default_name: str = "e
     config = ExperimentConfig(name, source, seed, tuple(scenes), realisations, tuple(entries), analytic,
                               posterior, truth, sigma_g, friction, spread, budget, gripper, protocol, batch)
     for path in scenes:  # every scene must load with the overrides, before any work starts
-        load_scene(path, config.scene_overrides)
+        try:
+            load_scene(path, config.scene_overrides)
+        except InputError as exc:
+            load_scene(path)  # a fault of the scene file itself is reported as such
+            raise InputError(source, exc.field, f"{exc.message} (for scene {Path(path).stem})") from None
     return config
 
 

@@ -213,6 +213,7 @@ BAD_CONFIGS = [
     ('[physics]\ntime_step = 0.5\n[[planners]]\nname = "gp-p"', "physics.time_step"),
     ('colour = "red"\n[[planners]]\nname = "gp-p"', "colour"),
     ('[[planners]]\nname = "gp-p"\n[[planners]]\nname = "gp-p"', "planners[1].label"),
+    ('[gripper]\nopening = 0\n[[planners]]\nname = "gp-p"', "gripper.opening"),
     ("this is not toml", None),
 ]
 
