@@ -115,18 +115,25 @@ def _scenes_render(args) -> int:
     return 0
 
 
-def _quality(args) -> int:
-    from harness.belief import build_belief
+def _scene_and_grasp(args):
+    """The scene and the --grasp of a command; a grasp the gripper cannot execute is bad input."""
     from harness.grasp import Grasp
-    from harness.quality import default_streams, draw_evaluation, estimate_p_f
     from harness.scene import load_scene
-    from harness.seeding import stream
 
     scene = load_scene(args.scene)
     grasp = Grasp(tuple(args.grasp[:2]), tuple(args.grasp[2:]))
     problem = grasp.problem(scene.grid, scene.gripper.opening)
     if problem:
         raise InputError("--grasp", None, problem)
+    return scene, grasp
+
+
+def _quality(args) -> int:
+    from harness.belief import build_belief
+    from harness.quality import default_streams, draw_evaluation, estimate_p_f
+    from harness.seeding import stream
+
+    scene, grasp = _scene_and_grasp(args)
     sigma_g, friction = _problem_options(args, scene)
     belief = build_belief(scene, stream(args.seed, scene.name, 0, "sensor"))
     draws = draw_evaluation(belief, args.samples, *default_streams(args.seed, scene.name))
@@ -149,18 +156,12 @@ def _simulate(args) -> int:
     from tqdm import tqdm
 
     from harness.belief import build_belief
-    from harness.grasp import Grasp
     from harness.physics.simulate import SimulationSummary, make_trials, sample_polygons, truth_polygon
     from harness.physics.trial import Runner
     from harness.quality import default_streams
-    from harness.scene import load_scene
     from harness.seeding import stream
 
-    scene = load_scene(args.scene)
-    grasp = Grasp(tuple(args.grasp[:2]), tuple(args.grasp[2:]))
-    problem = grasp.problem(scene.grid, scene.gripper.opening)
-    if problem:
-        raise InputError("--grasp", None, problem)
+    scene, grasp = _scene_and_grasp(args)
     if args.frames is not None and Path(args.frames).exists() and not Path(args.frames).is_dir():
         raise InputError("--frames", None, f"{args.frames} exists and is not a folder")
     sigma_g, friction = _problem_options(args, scene)
