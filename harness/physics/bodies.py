@@ -155,8 +155,11 @@ def create_body(client: int, polygon: Polygon, thickness: float, density: float,
     (agreement 0.89), while the compound agreed with it (0.97, chaos level)."""
     pieces = convex_pieces(polygon)
     cores = [_core(piece, thickness) for piece in pieces]
-    shape = pb.createCollisionShape(pb.GEOM_MESH, fileName=str(_compound_file(cores, thickness)),
-                                    physicsClientId=client)
+    path = _compound_file(cores, thickness)
+    try:
+        shape = pb.createCollisionShape(pb.GEOM_MESH, fileName=str(path), physicsClientId=client)
+    finally:
+        path.unlink(missing_ok=True)  # read at once; thousands of posterior samples must not pile up
     props = prism_mass_properties(polygon, thickness, density)
     moments, axes = np.linalg.eigh(props.inertia)
     if np.linalg.det(axes) < 0:
@@ -182,8 +185,8 @@ def create_body(client: int, polygon: Polygon, thickness: float, density: float,
 def _compound_file(cores: list, thickness: float) -> Path:
     """An OBJ file with one object per convex piece (pybullet builds a compound of convex
     hulls only from a file). Each hull gets Bullet's default margin, COLLISION_MARGIN, so
-    pieces are shrunk by it (:func:`_core`). Named by a hash of its text, so processes
-    share identical files and never see a half-written one."""
+    pieces are shrunk by it (:func:`_core`). The name holds this process's id and a hash
+    of the text: no other process touches it, and a name always means the same shape."""
     lines, base = [], 1
     for k, (core, margin) in enumerate(cores):
         z0 = min(margin, 0.25 * thickness)  # prisms thinner than 4 mm come out up to 2 mm thick
@@ -194,11 +197,9 @@ def _compound_file(cores: list, thickness: float) -> Path:
         lines += [f"f {tris[i] + base} {tris[i + 1] + base} {tris[i + 2] + base}" for i in range(0, len(tris), 3)]
         base += len(ring)
     text = "\n".join(lines) + "\n"
-    path = Path(tempfile.gettempdir()) / f"gpis-harness-body-{hashlib.sha256(text.encode()).hexdigest()[:20]}.obj"
-    if not path.exists():
-        partial = path.with_suffix(f".{os.getpid()}.tmp")
-        partial.write_text(text)
-        os.replace(partial, path)
+    digest = hashlib.sha256(text.encode()).hexdigest()[:20]
+    path = Path(tempfile.gettempdir()) / f"gpis-harness-body-{os.getpid()}-{digest}.obj"
+    path.write_text(text)
     return path
 
 
