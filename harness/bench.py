@@ -330,7 +330,8 @@ PHYSICS_GRASPS_PER_SCENE = 12
 def physics(grasps_per_scene: int = PHYSICS_GRASPS_PER_SCENE, seed: int = 0) -> dict:
     """Trials per second of the batched runner and of a naive one (a new world per trial,
     no early stop) on the same trials, and the outcome agreement with a 4x finer step."""
-    from harness.physics.study import agreement, confusion, library_trials, outcome_table, run_batched, run_naive
+    from harness.physics.simulate import outcome_counts
+    from harness.physics.study import agreement, confusion, library_trials, run_batched, run_naive
     from harness.physics.trial import Protocol
 
     trials = library_trials(grasps_per_scene, seed).trials
@@ -344,7 +345,7 @@ def physics(grasps_per_scene: int = PHYSICS_GRASPS_PER_SCENE, seed: int = 0) -> 
         "fine_step_agreement": agreement(batched.results, fine.results),
         "fine_step_disagreements": confusion(batched.results, fine.results),
         "naive_agreement": agreement(batched.results, naive.results),
-        "outcomes": outcome_table(batched.results), "outcomes_fine_step": outcome_table(fine.results),
+        "outcomes": outcome_counts(batched.results), "outcomes_fine_step": outcome_counts(fine.results),
         "seconds": {"batched": batched.seconds, "naive": naive.seconds, "fine_step": fine.seconds},
     }
 

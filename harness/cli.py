@@ -308,6 +308,19 @@ def _bench(args) -> int:
     return 0
 
 
+_GRASP = {"nargs": 4, "type": _coordinate, "required": True, "metavar": ("X1", "Y1", "X2", "Y2"),
+          "help": "jaw start points g1 and g2 in metres"}
+
+
+def _add_problem_options(p: argparse.ArgumentParser) -> None:
+    """--seed, --sigma-g and --friction, shared by plan, quality and simulate."""
+    p.add_argument("--seed", type=_seed, default=0, help="experiment seed (default 0)")
+    p.add_argument("--sigma-g", type=_non_negative, default=None,
+                   help="approach noise std per jaw start, metres (default: the scene's gripper.sigma_g)")
+    p.add_argument("--friction", type=_non_negative, default=None,
+                   help="jaw-object friction coefficient (default: the scene's physics.friction)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog=PROG, description="Grasp planning under shape uncertainty, validated by physics.")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
@@ -331,14 +344,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("quality", help="Monte-Carlo probability of force closure of one grasp")
     p.add_argument("scene", help="library name or path to a scene file")
-    p.add_argument("--grasp", nargs=4, type=_coordinate, required=True, metavar=("X1", "Y1", "X2", "Y2"),
-                   help="jaw start points g1 and g2 in metres")
+    p.add_argument("--grasp", **_GRASP)
     p.add_argument("--samples", type=_positive_int, default=1000, help="paired draws (default 1000)")
-    p.add_argument("--seed", type=_seed, default=0, help="experiment seed (default 0)")
-    p.add_argument("--sigma-g", type=_non_negative, default=None,
-                   help="approach noise std per jaw start, metres (default: the scene's gripper.sigma_g)")
-    p.add_argument("--friction", type=_non_negative, default=None,
-                   help="Coulomb friction coefficient (default: the scene's physics.friction)")
+    _add_problem_options(p)
     p.add_argument("--friction-spread", type=_non_negative, default=0.0,
                    help="std of the friction coefficient across draws (default 0)")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
@@ -346,16 +354,11 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("simulate", help="physics trials of one grasp in pybullet")
     p.add_argument("scene", help="library name or path to a scene file")
-    p.add_argument("--grasp", nargs=4, type=_coordinate, required=True, metavar=("X1", "Y1", "X2", "Y2"),
-                   help="jaw start points g1 and g2 in metres")
+    p.add_argument("--grasp", **_GRASP)
     p.add_argument("--trials", type=_positive_int, default=100, help="number of trials (default 100)")
     p.add_argument("--shapes", choices=["truth", "posterior"], default="posterior",
                    help="the true shape, or a new posterior sample per trial (default posterior)")
-    p.add_argument("--seed", type=_seed, default=0, help="experiment seed (default 0)")
-    p.add_argument("--sigma-g", type=_non_negative, default=None,
-                   help="approach noise std per jaw start, metres (default: the scene's gripper.sigma_g)")
-    p.add_argument("--friction", type=_non_negative, default=None,
-                   help="jaw-object friction coefficient (default: the scene's physics.friction)")
+    _add_problem_options(p)
     p.add_argument("--frames", metavar="DIR", default=None,
                    help="write PNG snapshots of each phase of the first trial into DIR")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
@@ -371,11 +374,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--planner", required=True, help="planner name (see planners list)")
     p.add_argument("--param", type=_key_value, action="append", metavar="KEY=VALUE",
                    help="planner parameter (repeatable)")
-    p.add_argument("--seed", type=_seed, default=0, help="experiment seed (default 0)")
-    p.add_argument("--sigma-g", type=_non_negative, default=None,
-                   help="approach noise std per jaw start, metres (default: the scene's gripper.sigma_g)")
-    p.add_argument("--friction", type=_non_negative, default=None,
-                   help="Coulomb friction coefficient (default: the scene's physics.friction)")
+    _add_problem_options(p)
     p.add_argument("--time-budget", type=_non_negative, default=None, help="seconds the planner may use")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     p.set_defaults(func=_plan)

@@ -17,7 +17,7 @@ import numpy as np
 
 from harness.belief import build_belief
 from harness.physics.simulate import make_trials, truth_polygon
-from harness.physics.trial import OUTCOMES, Protocol, Runner, Trial, TrialResult
+from harness.physics.trial import Protocol, Runner, Trial, TrialResult
 from harness.scene import library_names, load_scene
 from harness.seeding import stream
 
@@ -133,7 +133,3 @@ def confusion(a: list[TrialResult], b: list[TrialResult]) -> dict:
             key = f"{x.outcome} -> {y.outcome}"
             pairs[key] = pairs.get(key, 0) + 1
     return dict(sorted(pairs.items(), key=lambda kv: -kv[1]))
-
-
-def outcome_table(results: list[TrialResult]) -> dict:
-    return {name: sum(r.outcome == name for r in results) for name in OUTCOMES}
