@@ -381,17 +381,25 @@ class Batch:
     friction: np.ndarray
 
 
+@lru_cache(maxsize=4)
+def _runner(protocol):
+    """This process's pybullet client for ``protocol``, kept between batches: a connect
+    costs about 25 ms, and each batch starts from a reset world, so a batch's outcomes do
+    not depend on what the process ran before (tested)."""
+    from harness.physics.trial import MAX_BATCH, Runner
+
+    return Runner(protocol, batch_size=MAX_BATCH)
+
+
 def run_batch(config: ExperimentConfig, batch: Batch) -> list[dict]:
-    """The trials of one batch in one fresh pybullet world; rows for the ledger."""
+    """The trials of one batch in one freshly reset pybullet world; rows for the ledger."""
     from harness.physics.simulate import make_trials
-    from harness.physics.trial import Runner
 
     scene = scene_of(config, batch.scene_path)
     sigma_g, friction = problem_settings(config, scene)
     gammas = np.maximum(0.0, friction + config.friction_spread * batch.friction)
     trials = make_trials(scene, np.asarray(batch.grasp), batch.polygons, batch.approach, sigma_g, gammas)
-    with Runner(config.protocol(), batch_size=len(trials)) as runner:
-        results = runner.run(trials)
+    results = _runner(config.protocol()).run(trials)
     return [_trial_row(batch, i, r.outcome, r.steps, r.grip_width, r.closing_turn, r.rise, r.pivot)
             for i, r in zip(batch.indices, results, strict=True)]
 

@@ -91,3 +91,17 @@ def test_the_same_seed_gives_the_same_trials_and_outcomes():
     assert [t.polygon.wkb for t in trials_a] == [t.polygon.wkb for t in trials_b]
     assert [t.g1 + t.g2 for t in trials_a] == [t.g1 + t.g2 for t in trials_b]
     assert results_a == results_b  # bit for bit: outcomes, steps, grip widths, turns
+
+
+def test_a_batch_does_not_depend_on_what_its_runner_ran_before():
+    """Workers keep one client for many batches; each batch starts from a reset world,
+    so its outcomes are the same bit for bit as in a fresh client."""
+    scene = load_scene("rectangle")
+    batch = [_rectangle_trial((-0.045, y), (0.045, y), scene) for y in (0.0, 0.01)]
+    before = [_rectangle_trial((x, -0.02), (0.04, 0.02), scene) for x in (-0.045, -0.04)]
+    with Runner() as fresh:
+        alone = [repr(r.as_dict()) for r in fresh.run(batch)]
+    with Runner() as used:
+        used.run(before)
+        after = [repr(r.as_dict()) for r in used.run(batch)]
+    assert after == alone
