@@ -381,14 +381,20 @@ class Batch:
     friction: np.ndarray
 
 
-@lru_cache(maxsize=4)
+_THREAD = threading.local()
+
+
 def _runner(protocol):
-    """This process's pybullet client for ``protocol``, kept between batches: a connect
-    costs about 25 ms, and each batch starts from a reset world, so a batch's outcomes do
-    not depend on what the process ran before (tested)."""
+    """This thread's pybullet client for ``protocol``, kept between batches (a connect
+    costs about 25 ms). One per thread, as a Dask worker may run tasks in several. Each
+    batch starts from a reset world, so its outcomes do not depend on what ran before
+    (tested)."""
     from harness.physics.trial import MAX_BATCH, Runner
 
-    return Runner(protocol, batch_size=MAX_BATCH)
+    runners = _THREAD.__dict__.setdefault("runners", {})
+    if protocol not in runners:
+        runners[protocol] = Runner(protocol, batch_size=MAX_BATCH)
+    return runners[protocol]
 
 
 def run_batch(config: ExperimentConfig, batch: Batch) -> list[dict]:
