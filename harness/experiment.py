@@ -4,7 +4,7 @@ A cell is one scene and one sensor realisation (one belief). Its cell task build
 belief, runs every planner that has no plan in the ledger yet, judges each plan by the
 analytic P_F, and returns the polygons of the posterior shape samples that the physics
 trials use. Each plan's trials then run as fixed batches (``batch_size`` consecutive
-trials of one plan and one shape source, in one fresh pybullet world), so which trials
+trials of one plan and one shape source, in one freshly reset pybullet world), so which trials
 share a world is fixed by the config, never by the number of workers.
 
 Random streams (harness.seeding) are named by (seed, scene, realisation, purpose):
