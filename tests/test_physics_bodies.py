@@ -167,3 +167,28 @@ def test_cutting_a_convex_shape_into_pieces_changes_nothing_physical(monkeypatch
     agreement = np.mean([a == b for a, b in zip(whole, cut)])
     assert agreement >= 0.93, (whole, cut)
     assert abs(whole.count("success") - cut.count("success")) <= 2
+
+
+def test_a_rebuilt_shape_gives_the_same_body_and_a_swapped_decomposition_is_honoured(client, monkeypatch):
+    """Bodies are built from a per-process recipe cached by the exact polygon: the second
+    body of a shape has the first's pieces and mass; a different decomposition function
+    (as the cut-bar test swaps in) gets its own recipe, never the cached one."""
+    from harness.physics import bodies
+
+    bar = box(-0.06, -0.015, 0.06, 0.015)
+    first = create_body(client, bar, 0.03, 400.0, 0.5)
+    again = create_body(client, shapely.Polygon(bar.exterior.coords), 0.03, 400.0, 0.5, origin=(1.0, 0.0))
+    assert again.pieces == first.pieces and len(first.pieces) == 1
+    assert _body_mass_and_com(client, again.body_id)[0] == _body_mass_and_com(client, first.body_id)[0]
+    assert again.body_id != first.body_id
+
+    def halves(polygon):
+        return [polygon.intersection(box(-1, -1, 0, 1)), polygon.intersection(box(0, -1, 1, 1))]
+
+    monkeypatch.setattr(bodies, "convex_pieces", halves)
+    cut = create_body(client, bar, 0.03, 400.0, 0.5, origin=(2.0, 0.0))
+    assert len(cut.pieces) == 2
+    assert sum(p.area for p in cut.pieces) == pytest.approx(bar.area, rel=1e-12)
+    mass, com = _body_mass_and_com(client, cut.body_id)
+    assert mass == pytest.approx(400.0 * 0.03 * bar.area, rel=1e-9)
+    assert com == pytest.approx([2.0, 0.0, 0.015], abs=1e-9)

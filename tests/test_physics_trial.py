@@ -105,3 +105,26 @@ def test_a_batch_does_not_depend_on_what_its_runner_ran_before():
         used.run(before)
         after = [repr(r.as_dict()) for r in used.run(batch)]
     assert after == alone
+
+
+@pytest.mark.parametrize("factor", [1, 4])
+def test_the_precomputed_base_motion_matches_the_protocols_closed_forms(factor):
+    """The lift follows the minimum-jerk profile to the full height; the shake runs one
+    circle of the amplitude under the sin^2 envelope, with the turn in phase with it."""
+    from harness.physics.trial import _motion
+
+    p = Protocol().finer(factor)
+    m = _motion(p)
+    assert (m.lift_steps, m.hold_steps, m.shake_steps) == (192 * factor, 48 * factor, 240 * factor)
+    assert m.rise[-1] == pytest.approx(p.lift_height, abs=1e-15)
+    half = m.lift_steps // 2 - 1  # the step ending at half the lift time: half the height, by symmetry
+    assert m.rise[half] == pytest.approx(0.5 * p.lift_height, abs=1e-15)
+    assert all(b > a for a, b in zip(m.rise, m.rise[1:]))
+    for k in (0, m.shake_steps // 4, m.shake_steps // 2, m.shake_steps - 1):
+        t = (k + 1) * p.time_step
+        envelope = math.sin(math.pi * t / p.shake_time) ** 2
+        a, b, turn = m.shake[k]
+        assert math.hypot(a, b) == pytest.approx(p.shake_amplitude * envelope, abs=1e-15)
+        assert turn == pytest.approx(p.shake_turn * a / p.shake_amplitude, abs=1e-15)
+    peak = max(math.hypot(a, b) for a, b, _ in m.shake)
+    assert peak == pytest.approx(p.shake_amplitude, rel=1e-4)

@@ -8,6 +8,7 @@ import hashlib
 import os
 import tempfile
 from dataclasses import dataclass
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -153,40 +154,62 @@ def create_body(client: int, polygon: Polygon, thickness: float, density: float,
     One base, not one fixed link per piece: the fidelity study (docs/physics.md) found
     that a convex shape cut into fixed links behaved unlike the same shape in one piece
     (agreement 0.89), while the compound agreed with it (0.97, chaos level)."""
-    pieces = convex_pieces(polygon)
-    cores = [_core(piece, thickness) for piece in pieces]
-    path = _compound_file(cores, thickness)
+    recipe = _recipe(polygon, thickness, density, convex_pieces)
+    path = _mesh_file(recipe.mesh)
     try:
         shape = pb.createCollisionShape(pb.GEOM_MESH, fileName=str(path), physicsClientId=client)
     finally:
         path.unlink(missing_ok=True)  # read at once; thousands of posterior samples must not pile up
-    props = prism_mass_properties(polygon, thickness, density)
-    moments, axes = np.linalg.eigh(props.inertia)
-    if np.linalg.det(axes) < 0:
-        axes[:, 0] *= -1
     look = -1
     if visual:
         vertices, indices = [], []
-        for piece in pieces:
+        for piece in recipe.pieces:
             ring = _prism_vertices(piece, 0.0, thickness)
             indices += [len(vertices) + i for i in _prism_triangles(len(ring) // 2)]
             vertices += ring
         look = pb.createVisualShape(pb.GEOM_MESH, vertices=vertices, indices=indices, rgbaColor=OBJECT_RGBA,
                                     physicsClientId=client)
-    body = pb.createMultiBody(baseMass=props.mass, baseCollisionShapeIndex=shape, baseVisualShapeIndex=look,
+    body = pb.createMultiBody(baseMass=recipe.props.mass, baseCollisionShapeIndex=shape, baseVisualShapeIndex=look,
                               basePosition=[float(origin[0]), float(origin[1]), 0.0],
-                              baseInertialFramePosition=props.com.tolist(), baseInertialFrameOrientation=_quaternion(axes),
-                              physicsClientId=client)
-    pb.changeDynamics(body, -1, localInertiaDiagonal=moments.tolist(), lateralFriction=friction,
+                              baseInertialFramePosition=recipe.props.com.tolist(),
+                              baseInertialFrameOrientation=recipe.principal_axes, physicsClientId=client)
+    pb.changeDynamics(body, -1, localInertiaDiagonal=recipe.moments, lateralFriction=friction,
                       physicsClientId=client)
-    return Body(body, polygon, tuple(pieces), props)
+    return Body(body, polygon, recipe.pieces, recipe.props)
 
 
-def _compound_file(cores: list, thickness: float) -> Path:
-    """An OBJ file with one object per convex piece (pybullet builds a compound of convex
+@dataclass(frozen=True)
+class _Recipe:
+    """Everything a body is built from that depends only on its shape: the convex
+    pieces, the compound's OBJ text, the mass properties, the principal moments and the
+    principal axes (a quaternion)."""
+
+    pieces: tuple
+    mesh: str
+    props: MassProperties
+    moments: list
+    principal_axes: list
+
+
+@lru_cache(maxsize=256)
+def _recipe(polygon: Polygon, thickness: float, density: float, decompose) -> _Recipe:
+    """Built once per process for each shape: an experiment executes every posterior
+    sample once per planner and the true shape in every truth trial. Keyed by the exact
+    polygon and by the decomposition function itself (so a test that swaps the
+    decomposition never sees a body built by another)."""
+    pieces = tuple(decompose(polygon))
+    mesh = _compound_text([_core(piece, thickness) for piece in pieces], thickness)
+    props = prism_mass_properties(polygon, thickness, density)
+    moments, axes = np.linalg.eigh(props.inertia)
+    if np.linalg.det(axes) < 0:
+        axes[:, 0] *= -1
+    return _Recipe(pieces, mesh, props, moments.tolist(), _quaternion(axes))
+
+
+def _compound_text(cores: list, thickness: float) -> str:
+    """An OBJ text with one object per convex piece (pybullet builds a compound of convex
     hulls only from a file). Each hull gets Bullet's default margin, COLLISION_MARGIN, so
-    pieces are shrunk by it (:func:`_core`). The name holds this process's id and a hash
-    of the text: no other process touches it, and a name always means the same shape."""
+    pieces are shrunk by it (:func:`_core`)."""
     lines, base = [], 1
     for k, (core, margin) in enumerate(cores):
         z0 = min(margin, 0.25 * thickness)  # prisms thinner than 4 mm come out up to 2 mm thick
@@ -196,7 +219,13 @@ def _compound_file(cores: list, thickness: float) -> Path:
         tris = _prism_triangles(len(ring) // 2)
         lines += [f"f {tris[i] + base} {tris[i + 1] + base} {tris[i + 2] + base}" for i in range(0, len(tris), 3)]
         base += len(ring)
-    text = "\n".join(lines) + "\n"
+    return "\n".join(lines) + "\n"
+
+
+def _mesh_file(text: str) -> Path:
+    """``text`` written to a temporary OBJ file. The name holds this process's id and a
+    hash of the text: no other process touches it, and a name always means the same
+    shape."""
     digest = hashlib.sha256(text.encode()).hexdigest()[:20]
     path = Path(tempfile.gettempdir()) / f"gpis-harness-body-{os.getpid()}-{digest}.obj"
     path.write_text(text)

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
+from functools import lru_cache
 from pathlib import Path
 from typing import Callable, Sequence
 
@@ -226,18 +227,50 @@ class Runner:
             for slot in active:
                 slot.before_step()
             pb.stepSimulation(physicsClientId=c)
+            decided = False
             for slot in active:
                 slot.after_step()
-            for slot in [s for s in active if s.result is not None]:
-                slot.remove()
-                results[slot.index] = slot.result
-            active = [s for s in active if s.result is None]
+                decided = decided or slot.result is not None
+            if decided:
+                for slot in active:
+                    if slot.result is not None:
+                        slot.remove()
+                        results[slot.index] = slot.result
+                active = [s for s in active if s.result is None]
         return results  # type: ignore[return-value]
 
 
 def _minimum_jerk(u: float) -> float:
     u = min(max(u, 0.0), 1.0)
     return u * u * u * (10.0 + u * (-15.0 + 6.0 * u))
+
+
+@dataclass(frozen=True)
+class _Motion:
+    """A protocol's phase lengths (steps) and the base's motion at each step after the
+    jaws stall, computed once per protocol instead of once per trial and step: the
+    lift's rise, and the shake's in-plane offsets (along and across the closing axis)
+    and turn."""
+
+    lift_steps: int
+    hold_steps: int
+    shake_steps: int
+    rise: tuple[float, ...]
+    shake: tuple[tuple[float, float, float], ...]
+
+
+@lru_cache(maxsize=8)
+def _motion(p: Protocol) -> _Motion:
+    lift, hold, shake = p.steps(p.lift_time), p.steps(p.hold_time), p.steps(p.shake_time)
+    rise = tuple(p.lift_height * _minimum_jerk((k + 1) / lift) for k in range(lift))
+    w = 2 * math.pi * p.shake_frequency
+    offsets = []
+    for k in range(shake):
+        t = (k + 1) * p.time_step
+        envelope = math.sin(math.pi * min(t / p.shake_time, 1.0)) ** 2
+        offsets.append((p.shake_amplitude * envelope * math.sin(w * t), p.shake_amplitude * envelope * math.cos(w * t),
+                        p.shake_turn * envelope * math.sin(w * t)))
+    return _Motion(lift, hold, shake, rise, tuple(offsets))
 
 
 def _yaw(quaternion) -> float:
@@ -257,6 +290,7 @@ class _Slot:
     result: TrialResult | None = None
     phase: str = "close"
     tick: int = 0               # steps since this phase began
+    phase_steps: int = 0        # how long this phase lasts (lift, hold, shake; closing ends by itself)
     steps: int = 0
     failure: str | None = None  # first failure seen when not stopping early
     quiet: int = 0              # checks in a row with the object lost / steps with stalled jaws
@@ -280,8 +314,9 @@ class _Slot:
         self.centre = (centre[0] + ox, centre[1] + oy)
         self.heading = heading
         self.base_z = g.depth + _TABLE_GAP
-        self.grip = pb.loadURDF(g.urdf, [self.centre[0], self.centre[1], self.base_z],
-                                pb.getQuaternionFromEuler([0, 0, heading]), physicsClientId=c)
+        self.orientation = pb.getQuaternionFromEuler([0, 0, heading])
+        self.grip = pb.loadURDF(g.urdf, [self.centre[0], self.centre[1], self.base_z], self.orientation,
+                                physicsClientId=c)
         for link in range(-1, pb.getNumJoints(self.grip, physicsClientId=c)):
             pb.changeDynamics(self.grip, link, lateralFriction=t.friction, frictionAnchor=int(p.friction_anchor),
                               physicsClientId=c)
@@ -304,39 +339,35 @@ class _Slot:
         self.pivot, self.pivot_orn = pb.invertTransform(*inertial)
         self.constraint = pb.createConstraint(self.grip, -1, -1, -1, pb.JOINT_FIXED, [0, 0, 0],
                                               self.pivot, [self.centre[0], self.centre[1], self.base_z],
-                                              self.pivot_orn, pb.getQuaternionFromEuler([0, 0, heading]),
-                                              physicsClientId=c)
+                                              self.pivot_orn, self.orientation, physicsClientId=c)
         pb.changeConstraint(self.constraint, maxForce=BASE_FORCE, physicsClientId=c)
         self.start_z, self.start_yaw = self._object_height_and_yaw()
         self.stall_steps = p.steps(p.stall_time)
         self.close_steps = p.steps(0.5 * width / g.closing_speed + p.closing_slack)
         self.check_steps = p.steps(p.check_interval)
         self.lost_checks = max(1, int(math.ceil(p.lost_time / (self.check_steps * p.time_step))))
+        self.motion = _motion(p)
         if self.camera is not None:
             self.camera.snapshot("1-placed", self)
 
     # -- per step ---------------------------------------------------------------------
 
     def before_step(self) -> None:
-        p = self.runner.protocol
         if self.phase == "lift":
-            z = self.base_z + p.lift_height * _minimum_jerk((self.tick + 1) / p.steps(p.lift_time))
-            self._move(self.centre[0], self.centre[1], z, self.heading)
+            self._move(self.centre[0], self.centre[1], self.base_z + self.motion.rise[self.tick], self.orientation)
         elif self.phase == "shake":
-            t = (self.tick + 1) * p.time_step
-            envelope = math.sin(math.pi * min(t / p.shake_time, 1.0)) ** 2
-            w = 2 * math.pi * p.shake_frequency
-            a, b = p.shake_amplitude * envelope * math.sin(w * t), p.shake_amplitude * envelope * math.cos(w * t)
+            a, b, turn = self.motion.shake[self.tick]
             ch, sh = math.cos(self.heading), math.sin(self.heading)
             self._move(self.centre[0] + a * ch - b * sh, self.centre[1] + a * sh + b * ch,
-                       self.base_z + p.lift_height, self.heading + p.shake_turn * envelope * math.sin(w * t))
+                       self.base_z + self.runner.protocol.lift_height,
+                       pb.getQuaternionFromEuler([0, 0, self.heading + turn]))
 
     def after_step(self) -> None:
         self.tick += 1
         self.steps += 1
         if self.phase == "close":
             self._after_closing_step()
-        elif self.tick % self.check_steps == 0 or self._phase_over():
+        elif self.tick % self.check_steps == 0 or self.tick >= self.phase_steps:
             if self._blew_up():
                 return self._finish("unstable")
             if self._near_jaws(self.runner.protocol.lost_distance) == 0:
@@ -345,19 +376,16 @@ class _Slot:
                     self._fail("slipped" if self.phase in ("lift", "hold") else "dropped")
             else:
                 self.quiet = 0
-            if self.result is None and self._phase_over():
+            if self.result is None and self.tick >= self.phase_steps:
                 self._end_phase()
-
-    def _phase_over(self) -> bool:
-        p = self.runner.protocol
-        length = {"lift": p.lift_time, "hold": p.hold_time, "shake": p.shake_time}[self.phase]
-        return self.tick >= p.steps(length)
 
     def _after_closing_step(self) -> None:
         c, g = self.runner.client, self.trial.gripper
-        states = pb.getJointStates(self.grip, list(g.finger_joints), physicsClientId=c)
-        slow = all(abs(s[1]) < self.runner.protocol.stall_fraction * g.closing_speed for s in states)
-        shut = all(abs(s[0] - lim) < 1e-4 for s, lim in zip(states, self.limits))
+        states = pb.getJointStates(self.grip, g.finger_joints, physicsClientId=c)
+        (q0, v0, *_), (q1, v1, *_) = states
+        slow_speed = self.runner.protocol.stall_fraction * g.closing_speed
+        slow = abs(v0) < slow_speed and abs(v1) < slow_speed
+        shut = abs(q0 - self.limits[0]) < 1e-4 and abs(q1 - self.limits[1]) < 1e-4
         self.quiet = self.quiet + 1 if slow else 0
         if self._blew_up():
             return self._finish("unstable")
@@ -398,6 +426,8 @@ class _Slot:
 
     def _begin(self, phase: str) -> None:
         self.phase, self.tick, self.quiet = phase, 0, 0
+        m = self.motion
+        self.phase_steps = {"lift": m.lift_steps, "hold": m.hold_steps, "shake": m.shake_steps}[phase]
 
     def _fail(self, outcome: str) -> None:
         """Record a failure: the trial ends now with early stopping, else at the end of
@@ -416,17 +446,16 @@ class _Slot:
 
     # -- queries ------------------------------------------------------------------------
 
-    def _move(self, x: float, y: float, z: float, yaw: float) -> None:
-        c = self.runner.client
-        pb.changeConstraint(self.constraint, [x, y, z], pb.getQuaternionFromEuler([0, 0, yaw]),
-                            maxForce=BASE_FORCE, physicsClientId=c)
+    def _move(self, x: float, y: float, z: float, orientation) -> None:
+        pb.changeConstraint(self.constraint, [x, y, z], orientation, maxForce=BASE_FORCE,
+                            physicsClientId=self.runner.client)
 
     def _near_jaws(self, distance: float) -> int:
         """How many of the two jaws are within ``distance`` of the object (closest points,
         not Bullet's contact manifold, which can drop points while an object pivots)."""
-        c = self.runner.client
-        return sum(bool(pb.getClosestPoints(self.obj, self.grip, distance, linkIndexB=link, physicsClientId=c))
-                   for link in self.trial.gripper.jaw_links)
+        points = pb.getClosestPoints(self.obj, self.grip, distance, physicsClientId=self.runner.client)
+        links = {point[4] for point in points}
+        return sum(link in links for link in self.trial.gripper.jaw_links)
 
     def _on_table(self) -> bool:
         return bool(pb.getContactPoints(self.obj, self.runner.table, physicsClientId=self.runner.client))
@@ -458,7 +487,7 @@ class _Slot:
         p, c = self.runner.protocol, self.runner.client
         pos, _ = pb.getBasePositionAndOrientation(self.obj, physicsClientId=c)
         lin, ang = pb.getBaseVelocity(self.obj, physicsClientId=c)
-        if not all(math.isfinite(v) for v in (*pos, *lin, *ang)):
+        if not all(map(math.isfinite, (*pos, *lin, *ang))):
             return True
         return math.hypot(*lin) > p.max_speed or math.hypot(*ang) > p.max_spin
 
