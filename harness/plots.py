@@ -8,6 +8,7 @@ matplotlib.use("Agg")
 
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+import pandas as pd  # noqa: E402
 from matplotlib.colors import LogNorm  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 from shapely.geometry import box  # noqa: E402
@@ -298,7 +299,7 @@ def report_figures(out_dir, data, summary, bins, fails) -> list:
         grasps = {}
         for entry in config.planners:
             row = rows.loc[entry.label] if entry.label in rows.index else None
-            ok = row is not None and row.g1x == row.g1x and row.g1x is not None  # NULL reads as NaN or None
+            ok = row is not None and pd.notna(row.g1x)  # a plan without a grasp reads as NaN or None
             grasps[entry.label] = ((row.g1x, row.g1y), (row.g2x, row.g2y)) if ok else None
         fig = grasps_figure(belief, grasps, stream(config.seed, scene.name, 0, "blur"),
                             title=f"{scene.name}, realisation 0: GPIS-Blur and the planners' grasps\n"

@@ -313,6 +313,7 @@ class _Slot:
         heading = math.atan2(t.axis[1], t.axis[0]) - math.atan2(g.closing_axis[1], g.closing_axis[0])
         self.centre = (centre[0] + ox, centre[1] + oy)
         self.heading = heading
+        self.heading_cos_sin = (math.cos(heading), math.sin(heading))
         self.base_z = g.depth + _TABLE_GAP
         self.orientation = pb.getQuaternionFromEuler([0, 0, heading])
         self.grip = pb.loadURDF(g.urdf, [self.centre[0], self.centre[1], self.base_z], self.orientation,
@@ -357,7 +358,7 @@ class _Slot:
             self._move(self.centre[0], self.centre[1], self.base_z + self.motion.rise[self.tick], self.orientation)
         elif self.phase == "shake":
             a, b, turn = self.motion.shake[self.tick]
-            ch, sh = math.cos(self.heading), math.sin(self.heading)
+            ch, sh = self.heading_cos_sin
             self._move(self.centre[0] + a * ch - b * sh, self.centre[1] + a * sh + b * ch,
                        self.base_z + self.runner.protocol.lift_height,
                        pb.getQuaternionFromEuler([0, 0, self.heading + turn]))
