@@ -215,7 +215,7 @@ class GPIS:
         """
         xs = np.asarray(xs, dtype=float)
         ys = np.asarray(ys, dtype=float)
-        with _single_threaded_blas():
+        with single_threaded_blas():
             bx, by = self._basis(0, xs), self._basis(1, ys)
             if (bx.rank * by.rank) ** 2 * 8 > 64e6:
                 xx, yy = np.meshgrid(xs, ys)
@@ -259,7 +259,7 @@ class GPIS:
         _check_method(method)
         if method == "pathwise":
             raise ValueError("method 'pathwise' needs a grid; use sample_grid or 'weight-space'")
-        with _single_threaded_blas():
+        with single_threaded_blas():
             return self._sample_points(P, n, rng)
 
     def _sample_points(self, P: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
@@ -317,7 +317,7 @@ class GPIS:
             grads = np.stack([mgrad[:, 0] + draws[:, k:2 * k], mgrad[:, 1] + draws[:, 2 * k:]], axis=-1)
             return values, grads.reshape(n, len(ys), len(xs), 2)
         _check_method(method)
-        with _single_threaded_blas():
+        with single_threaded_blas():
             return self._sample_grid_fast(xs, ys, n, rng, method)
 
     def _sample_grid_fast(self, xs: np.ndarray, ys: np.ndarray, n: int, rng: np.random.Generator, method: str):
@@ -659,7 +659,7 @@ def _blas_controller() -> ThreadpoolController:
     return ThreadpoolController()
 
 
-def _single_threaded_blas():
+def single_threaded_blas():
     """The fast samplers' products are small (r ~ 40): BLAS threads do not speed them up
     and on the project's 2-core machine slowed them by about 40 % (measured). Parallel
     work belongs to worker processes, one BLAS thread each."""

@@ -293,3 +293,34 @@ def test_corrupt_or_foreign_ledger_is_one_line_exit_2(tmp_path, capsys):
         assert len(err.splitlines()) == 1 and "ledger.sqlite" in err, err
         assert main(["report", str(out)]) == 2
         assert len(capsys.readouterr().err.strip().splitlines()) == 1
+
+
+def test_a_cell_plans_with_one_blas_thread_and_the_same_results(tmp_path, monkeypatch):
+    """The workers are the parallelism: inside a cell BLAS runs one thread, and the plan
+    and the trials' shapes are bit for bit those of a cell run with the process's own
+    BLAS threads (whatever this machine has)."""
+    from threadpoolctl import threadpool_info
+
+    import harness.belief
+    from harness.experiment import _cell, run_cell
+
+    def blas_threads():
+        return {i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"}
+
+    outside = blas_threads()
+    seen = []
+    real = harness.belief.build_belief
+
+    def spy(*args, **kwargs):
+        seen.append(blas_threads())
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(harness.belief, "build_belief", spy)
+    config = load_config(_write(tmp_path, TINY))
+    path, labels = config.scenes[0], ("mean-shape",)
+    limited, free = run_cell(config, path, 0, labels), _cell(config, path, 0, labels)
+    assert seen == [{1}, outside]
+    assert blas_threads() == outside
+    keys = ("g1x", "g1y", "g2x", "g2y", "estimate")
+    assert [limited.plans[0][k] for k in keys] == [free.plans[0][k] for k in keys]
+    assert all(a.equals_exact(b, 0.0) for a, b in zip(limited.polygons, free.polygons, strict=True))
