@@ -151,8 +151,8 @@ def grasps_figure(belief: Belief, grasps: dict, rng: np.random.Generator, n_blur
 
 
 def success_figure(summary):
-    """Physical success per scene and planner (posterior samples, filled; true shape,
-    hollow) with Wilson 95 % intervals."""
+    """Physical success per scene and planner (posterior samples, bars; true shape,
+    rings on the planner's bar) with Wilson 95 % intervals."""
     scenes = list(dict.fromkeys(summary.scene))
     planners = list(dict.fromkeys(summary.planner))
     fig, ax = plt.subplots(figsize=(max(7.5, 1.0 * len(scenes) + 2), 5.0), constrained_layout=True)
@@ -164,12 +164,14 @@ def success_figure(summary):
         err = np.vstack([s.success_rate - s.success_ci_low, s.success_ci_high - s.success_rate])
         ax.bar(x, s.success_rate, width * 0.92, color=colour, label=f"{planner} (posterior)")
         ax.errorbar(x, s.success_rate, yerr=np.nan_to_num(err), fmt="none", ecolor="black", lw=0.8, capsize=2)
-        ax.plot(x, s.truth_success_rate, ls="none", marker="o", mfc="white", mec=colour, mew=1.5, ms=6,
-                label=f"{planner} (true shape)")
+        # Black rings on white: visible on every bar colour, inside a bar or above it; the
+        # planner is the bar the ring sits on.
+        ax.plot(x, s.truth_success_rate, ls="none", marker="o", mfc="white", mec="black", mew=1.2, ms=6,
+                label="true shape" if k == 0 else None)
     ax.set_xticks(np.arange(len(scenes)), scenes, rotation=30, ha="right")
     ax.set_ylim(0, 1.05)
     ax.set_ylabel("physical success rate")
-    ax.legend(fontsize=7, ncol=len(planners), loc="upper center", bbox_to_anchor=(0.5, -0.22))
+    ax.legend(fontsize=7, ncol=len(planners) + 1, loc="upper center", bbox_to_anchor=(0.5, -0.22))
     ax.set_title("Success in physics trials\nbars: posterior samples with 95% CI; circles: true shape",
                  fontsize=10)
     return fig

@@ -175,10 +175,13 @@ def calibration(data: dict) -> tuple[pd.DataFrame, pd.DataFrame]:
 
 
 def failures(data: dict) -> pd.DataFrame:
-    """Trial outcomes by planner and shape source (counts)."""
+    """Trial outcomes by planner and shape source (counts), planners in the config's
+    order (as in the summary), posterior samples before the true shape."""
     t = data["trials"]
-    table = t.groupby(["planner", "shapes", "outcome"]).size().unstack("outcome", fill_value=0)
-    return table.reset_index()
+    table = t.groupby(["planner", "shapes", "outcome"]).size().unstack("outcome", fill_value=0).reset_index()
+    order = {label: k for k, label in enumerate(expected(data["config"])[1])}
+    rank = table.planner.map(order).fillna(len(order)) * 2 + (table.shapes != "posterior")
+    return table.iloc[np.argsort(rank.to_numpy(), kind="stable")].reset_index(drop=True)
 
 
 # ---------------------------------------------------------------------------

@@ -104,6 +104,14 @@ def test_eval_writes_every_table_and_figure(tiny_run, capsys):
     assert manifest["config_hash"] == load_config(config).hash and manifest["packages"]["pybullet"]
     tex = (out / "summary.tex").read_text()
     assert r"\toprule" in tex and r"\textbf{" in tex
+    # The outcome table lists the planners in the config's order, as the summary does, and
+    # its counts are the trials' own.
+    fails = pd.read_csv(out / "failures.csv")
+    assert list(fails.planner) == ["mean-shape", "mean-shape", "gp-p", "gp-p", "opt", "opt"]
+    assert list(fails.shapes) == ["posterior", "truth"] * 3
+    counts = trials.groupby(["planner", "shapes"]).size()
+    outcome_columns = [c for c in fails.columns if c not in ("planner", "shapes")]
+    assert all(fails[outcome_columns].sum(axis=1).to_numpy() == [counts[p, s] for p, s in zip(fails.planner, fails.shapes)])
     # With benchmark data in the folder, the report adds the convergence and runtime figures.
     bench = {"convergence": [{"seed": 0, "gp-p": [[0.1, 10, 0.5], [0.2, 20, 0.7]], "gp-gpis-opt": [[0.05, 1, 0.6]]}],
              "scp_s_per_init": {"25": 0.02, "50": 0.02}, "gpp_s_per_candidate": {"25": 0.01, "50": 0.02},
