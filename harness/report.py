@@ -180,8 +180,8 @@ def failures(data: dict) -> pd.DataFrame:
     t = data["trials"]
     table = t.groupby(["planner", "shapes", "outcome"]).size().unstack("outcome", fill_value=0).reset_index()
     order = {label: k for k, label in enumerate(expected(data["config"])[1])}
-    rank = table.planner.map(order).fillna(len(order)) * 2 + (table.shapes != "posterior")
-    return table.iloc[np.argsort(rank.to_numpy(), kind="stable")].reset_index(drop=True)
+    return table.sort_values(["planner", "shapes"], key=lambda c: c.map(order) if c.name == "planner" else c,
+                             kind="stable").reset_index(drop=True)
 
 
 # ---------------------------------------------------------------------------
