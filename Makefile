@@ -9,13 +9,14 @@ STAMP := $(VENV)/.installed
 setup: $(STAMP)
 
 # Reinstall only when the package metadata changed (editable install covers code).
-# uv (from PyPI, into the venv) installs the dependencies in about 15 s where pip takes
+# uv (from PyPI, into the venv) installs the dependencies in about 30 s where pip takes
 # about a minute; if uv cannot be installed or fails (a network only pip is configured
-# for, say), pip does the same install.
+# for, say), pip does the same install. Both compile the bytecode at install time, so
+# no process (each test subprocess, each worker) compiles the libraries as it starts.
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	{ $(BIN)/python -m pip install --quiet 'uv>=0.5,<1' \
-	  && $(BIN)/python -m uv pip install --quiet --python $(BIN)/python -e '.[dev,cluster]'; } \
+	  && $(BIN)/python -m uv pip install --quiet --compile-bytecode --python $(BIN)/python -e '.[dev,cluster]'; } \
 	|| { $(BIN)/python -m pip install --quiet --upgrade pip \
 	  && $(BIN)/python -m pip install --quiet -e '.[dev,cluster]'; }
 	touch $(STAMP)

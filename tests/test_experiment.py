@@ -10,6 +10,7 @@ import sqlite3
 import subprocess
 import sys
 import time
+from contextlib import closing
 from pathlib import Path
 
 import numpy as np
@@ -154,25 +155,42 @@ def test_results_do_not_depend_on_workers_or_executor(tiny_run, tmp_path):
         pd.testing.assert_frame_equal(trials, reference[1])
 
 
+def _ledger_trials(ledger: Path) -> int:
+    """Trial rows in a ledger that another process is writing (-1 before it has any)."""
+    if not ledger.exists():
+        return -1
+    try:
+        with closing(sqlite3.connect(ledger, timeout=5)) as db:
+            return db.execute("SELECT COUNT(*) FROM trials").fetchone()[0]
+    except sqlite3.OperationalError:  # the tables are being created
+        return -1
+
+
 def test_resume_after_kill_gives_the_uninterrupted_tables(tiny_run, tmp_path):
     config, reference_out = tiny_run
     reference = _tables(reference_out)
+    total = len(reference[1])
     out = tmp_path / "killed"
-    rng = np.random.default_rng(5)
+    ledger = out / "ledger.sqlite"
     command = [sys.executable, "-m", "harness", "eval", str(config), "--out", str(out), "--workers", "2",
                "--no-report"]
     env = dict(os.environ, PYTHONPATH=str(ROOT))
+    # Three random moments, chosen by progress rather than by the clock (a process's
+    # start-up time varies from machine to machine): as soon as the ledger holds at least
+    # 0 (planning may still run), then more trial rows, never the last batch.
+    moments = np.sort(np.random.default_rng(5).integers(0, total * 3 // 4, size=3))
     counts = []
-    for delay in rng.uniform(1.5, 4.0, size=3):
+    for moment in moments:
         proc = subprocess.Popen(command, cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                                 start_new_session=True)
-        time.sleep(delay)
+        deadline = time.monotonic() + 300
+        while _ledger_trials(ledger) < moment and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert proc.poll() is None, "the run ended before it could be killed"
         os.killpg(proc.pid, signal.SIGKILL)  # the main process and its workers, as a crash would
         proc.wait()
-        if (out / "ledger.sqlite").exists():
-            with sqlite3.connect(out / "ledger.sqlite") as db:
-                counts.append(db.execute("SELECT COUNT(*) FROM trials").fetchone()[0])
-    assert counts == sorted(counts) and counts and counts[0] < len(reference[1])  # killed mid-run, nothing lost
+        counts.append(_ledger_trials(ledger))
+    assert counts == sorted(counts) and 0 <= counts[0] < total  # killed mid-run, nothing lost
     assert subprocess.run(command, cwd=ROOT, env=env, capture_output=True, check=False).returncode == 0
     assert main(["report", str(out), "--no-figures"]) == 0
     summary, trials = _tables(out)
