@@ -237,6 +237,7 @@ BAD_CONFIGS = [
     ('[[planners]]\nname = "gp-p"\nparams = { wings = 2 }', "planners[0].params.wings"),
     ('[evaluation]\nposterior_trials = 1.5\n[[planners]]\nname = "gp-p"', "evaluation.posterior_trials"),
     ('[physics]\ntime_step = 0.5\n[[planners]]\nname = "gp-p"', "physics.time_step"),
+    ('[physics]\ncone_friction = 0\n[[planners]]\nname = "gp-p"', "physics.cone_friction"),
     ('colour = "red"\n[[planners]]\nname = "gp-p"', "colour"),
     ('[[planners]]\nname = "gp-p"\n[[planners]]\nname = "gp-p"', "planners[1].label"),
     ('[gripper]\nopening = 0\n[[planners]]\nname = "gp-p"', "gripper.opening"),
@@ -270,7 +271,8 @@ _values = st.one_of(st.integers(-10**6, 10**6), st.floats(allow_nan=True, allow_
 _keys = st.sampled_from(["seed", "scenes", "realisations", "name", "evaluation.analytic_draws",
                          "evaluation.posterior_trials", "evaluation.truth_trials", "evaluation.sigma_g",
                          "evaluation.friction", "evaluation.time_budget_s", "physics.time_step",
-                         "physics.solver_iterations", "physics.batch_size", "gripper.opening", "gripper.force",
+                         "physics.solver_iterations", "physics.batch_size", "physics.cone_friction",
+                         "gripper.opening", "gripper.force",
                          "planners.name", "planners.params.candidates", "bogus"])
 
 
@@ -350,3 +352,11 @@ def test_a_cell_plans_with_one_blas_thread_and_the_same_results(tmp_path, monkey
     keys = ("g1x", "g1y", "g2x", "g2y", "estimate")
     assert [limited.plans[0][k] for k in keys] == [free.plans[0][k] for k in keys]
     assert all(a.equals_exact(b, 0.0) for a, b in zip(limited.polygons, free.polygons, strict=True))
+
+
+def test_physics_overrides_reach_the_protocol(tmp_path):
+    path = _write(tmp_path, '[physics]\ncone_friction = false\nsolver_iterations = 80\n[[planners]]\nname = "gp-p"',
+                  "pyramid.toml")
+    protocol = load_config(path).protocol()
+    assert (protocol.cone_friction, protocol.solver_iterations) == (False, 80)
+    assert load_config(_write(tmp_path, '[[planners]]\nname = "gp-p"', "cone.toml")).protocol().cone_friction

@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pybullet as pb
 import pytest
 
 from harness.physics.simulate import make_trials, truth_polygon
@@ -67,6 +68,39 @@ def test_a_blown_up_simulation_is_recorded_as_unstable():
     trial = _rectangle_trial((-0.045, 0.0), (0.045, 0.0))
     with Runner(Protocol(max_speed=-1.0)) as runner:  # any motion counts as runaway
         assert runner.run([trial])[0].outcome == "unstable"
+
+
+def _pushed_distance(cone_friction: bool, angle: float, seconds: float = 0.25) -> float:
+    """How far a 100 g box on the trials' table slides in ``seconds`` under a constant
+    horizontal push at ``angle`` (rad) of 1.3 times its friction limit (jaw-object and
+    object-table friction as in a trial: the box carries 1, the table 0.5)."""
+    protocol = Protocol(cone_friction=cone_friction)
+    mass, mu = 0.1, protocol.table_friction
+    push = 1.3 * mu * mass * 9.81 * np.array([math.cos(angle), math.sin(angle), 0.0])
+    with Runner(protocol) as runner:
+        runner._reset_world()
+        c = runner.client
+        shape = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=[0.03, 0.03, 0.01], physicsClientId=c)
+        box = pb.createMultiBody(mass, shape, basePosition=[0, 0, 0.01], physicsClientId=c)
+        pb.changeDynamics(box, -1, lateralFriction=1.0, frictionAnchor=1, physicsClientId=c)
+        for _ in range(protocol.steps(seconds)):
+            centre = pb.getBasePositionAndOrientation(box, physicsClientId=c)[0]
+            pb.applyExternalForce(box, -1, push, centre, pb.WORLD_FRAME, physicsClientId=c)
+            pb.stepSimulation(physicsClientId=c)
+        x, y, _ = pb.getBasePositionAndOrientation(box, physicsClientId=c)[0]
+    return math.hypot(x, y)
+
+
+def test_friction_is_the_coulomb_cone_unless_the_protocol_asks_for_the_pyramid():
+    """Coulomb: the push leaves 0.3 mu g of acceleration in any direction, so the box
+    slides 0.15 mu g t^2 (46 mm in 0.25 s) along an axis and along the diagonal alike.
+    Bullet's pyramid bounds the two friction directions separately: along an axis it
+    agrees, but on the diagonal each component of the push (0.92 of the limit) is held."""
+    closed_form = 0.15 * Protocol().table_friction * 9.81 * 0.25 ** 2
+    assert _pushed_distance(True, 0.0) == pytest.approx(closed_form, rel=0.05)
+    assert _pushed_distance(True, math.pi / 4) == pytest.approx(closed_form, rel=0.05)
+    assert _pushed_distance(False, 0.0) == pytest.approx(closed_form, rel=0.05)
+    assert _pushed_distance(False, math.pi / 4) < 0.002
 
 
 def test_the_same_seed_gives_the_same_trials_and_outcomes():

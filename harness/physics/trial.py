@@ -60,6 +60,7 @@ class Protocol:
     shake_turn: float = 0.25         # rad, about the vertical through the grasp centre
     table_friction: float = 0.5      # the object carries 1, so this is object-table friction
     friction_anchor: bool = True     # Bullet's friction anchors: static friction without creep
+    cone_friction: bool = True       # the exact Coulomb cone; False: Bullet's pyramid (faster, anisotropic)
     check_interval: float = 1.0 / 60.0  # s between contact checks while lifting and shaking
     held_distance: float = 0.001     # m: a jaw this close to the object touches it
     lost_distance: float = 0.005     # m: an object this far from both jaws ...
@@ -199,7 +200,7 @@ class Runner:
         c, p = self.client, self.protocol
         pb.resetSimulation(physicsClientId=c)
         pb.setPhysicsEngineParameter(fixedTimeStep=p.time_step, numSolverIterations=p.solver_iterations,
-                                     numSubSteps=0, deterministicOverlappingPairs=1, enableConeFriction=1,
+                                     numSubSteps=0, deterministicOverlappingPairs=1, enableConeFriction=int(p.cone_friction),
                                      physicsClientId=c)
         pb.setGravity(0, 0, -9.81, physicsClientId=c)
         plane = pb.createCollisionShape(pb.GEOM_PLANE, physicsClientId=c)
