@@ -1,5 +1,5 @@
 """Physics trials: the approach check against the rectangle's closed form, the
-calibration grasps, the unstable outcome, and determinism. The large counts live in
+calibration grasps, the unstable outcome, the friction law, and determinism. The large counts live in
 ``gpis-harness bench physics``."""
 
 from __future__ import annotations
@@ -72,8 +72,8 @@ def test_a_blown_up_simulation_is_recorded_as_unstable():
 
 def _pushed_distance(cone_friction: bool, angle: float, seconds: float = 0.25) -> float:
     """How far a 100 g box on the trials' table slides in ``seconds`` under a constant
-    horizontal push at ``angle`` (rad) of 1.3 times its friction limit (jaw-object and
-    object-table friction as in a trial: the box carries 1, the table 0.5)."""
+    horizontal push at ``angle`` (rad) of 1.3 times its friction limit (friction as for a
+    trial's object: the box carries 1, the table 0.5)."""
     protocol = Protocol(cone_friction=cone_friction)
     mass, mu = 0.1, protocol.table_friction
     push = 1.3 * mu * mass * 9.81 * np.array([math.cos(angle), math.sin(angle), 0.0])

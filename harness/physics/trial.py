@@ -200,8 +200,8 @@ class Runner:
         c, p = self.client, self.protocol
         pb.resetSimulation(physicsClientId=c)
         pb.setPhysicsEngineParameter(fixedTimeStep=p.time_step, numSolverIterations=p.solver_iterations,
-                                     numSubSteps=0, deterministicOverlappingPairs=1, enableConeFriction=int(p.cone_friction),
-                                     physicsClientId=c)
+                                     numSubSteps=0, deterministicOverlappingPairs=1,
+                                     enableConeFriction=int(p.cone_friction), physicsClientId=c)
         pb.setGravity(0, 0, -9.81, physicsClientId=c)
         plane = pb.createCollisionShape(pb.GEOM_PLANE, physicsClientId=c)
         self.table = pb.createMultiBody(0, plane, physicsClientId=c)
