@@ -112,7 +112,8 @@ def test_eval_writes_every_table_and_figure(tiny_run, capsys):
     assert list(fails.shapes) == ["posterior", "truth"] * 3
     counts = trials.groupby(["planner", "shapes"]).size()
     outcome_columns = [c for c in fails.columns if c not in ("planner", "shapes")]
-    assert all(fails[outcome_columns].sum(axis=1).to_numpy() == [counts[p, s] for p, s in zip(fails.planner, fails.shapes)])
+    expected_counts = [counts[p, s] for p, s in zip(fails.planner, fails.shapes)]
+    assert all(fails[outcome_columns].sum(axis=1).to_numpy() == expected_counts)
     # With benchmark data in the folder, the report adds the convergence and runtime figures.
     bench = {"convergence": [{"seed": 0, "gp-p": [[0.1, 10, 0.5], [0.2, 20, 0.7]], "gp-gpis-opt": [[0.05, 1, 0.6]]}],
              "scp_s_per_init": {"25": 0.02, "50": 0.02}, "gpp_s_per_candidate": {"25": 0.01, "50": 0.02},
