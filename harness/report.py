@@ -96,37 +96,60 @@ def _paired(trials: pd.DataFrame, a: str, b: str, shapes: str) -> pd.DataFrame:
     return m
 
 
-def comparisons(data: dict, seed: int = 0) -> pd.DataFrame:
-    """Each planner against mean-shape, and every gp-gpis-opt entry against every gp-p
-    entry: success difference (a - b) on the same trials, a paired bootstrap 95 % interval
-    (trials resampled in pairs within each cell, so the interval is conditional on the
-    plans), and McNemar's exact p on the discordant pairs."""
-    config, trials = data["config"], data["trials"]
-    scenes, planners, _ = expected(config)
+def comparison_pairs(config: dict) -> list[tuple[str, str]]:
+    """The planner comparisons a report shows: each planner against mean-shape, then every
+    gp-gpis-opt entry against every gp-p entry (labels, in the config's order)."""
+    planners = expected(config)[1]
     names = {p["label"]: p["name"] for p in config["planners"]}
     pairs = []
     for base in (lab for lab in planners if names[lab] == BASELINE):
         pairs += [(lab, base) for lab in planners if lab != base]
     for opt in (lab for lab in planners if names[lab] == "gp-gpis-opt"):
         pairs += [(opt, gp) for gp in planners if names[gp] == "gp-p" and (opt, gp) not in pairs]
+    return pairs
+
+
+def paired_difference(d: np.ndarray, groups: list[np.ndarray], rng: np.random.Generator) -> dict:
+    """Mean of the paired differences ``d`` with a bootstrap 95 % interval that resamples
+    pairs within each group (index arrays into d), so it is conditional on what the groups
+    share (their plans)."""
+    boot = _bootstrap_means(d, groups, rng)
+    return {"pairs": len(d), "difference": float(d.mean()), "ci_low": float(np.percentile(boot, 2.5)),
+            "ci_high": float(np.percentile(boot, 97.5))}
+
+
+def mcnemar(a: np.ndarray, b: np.ndarray) -> tuple[int, int, float]:
+    """Discordant pairs of two 0/1 outcome arrays (a only, b only) and McNemar's exact p."""
+    only_a, only_b = int(((a == 1) & (b == 0)).sum()), int(((a == 0) & (b == 1)).sum())
+    p = stats.binomtest(only_a, only_a + only_b, 0.5).pvalue if only_a + only_b else 1.0
+    return only_a, only_b, float(p)
+
+
+def cell_groups(frame: pd.DataFrame) -> list[np.ndarray]:
+    """Row positions of ``frame`` by (scene, realisation): the trials that share a plan."""
+    return [g.index.to_numpy() for _, g in frame.reset_index(drop=True).groupby(["scene", "realisation"])]
+
+
+def comparisons(data: dict, seed: int = 0) -> pd.DataFrame:
+    """Each planner against mean-shape, and every gp-gpis-opt entry against every gp-p
+    entry: success difference (a - b) on the same trials, a paired bootstrap 95 % interval
+    (trials resampled in pairs within each cell, so the interval is conditional on the
+    plans), and McNemar's exact p on the discordant pairs."""
+    config, trials = data["config"], data["trials"]
+    scenes = expected(config)[0]
     rng = np.random.default_rng(np.random.SeedSequence([seed, 0x7EB0]))
     rows = []
-    for a, b in pairs:
+    for a, b in comparison_pairs(config):
         for shapes in ("posterior", "truth"):
             m = _paired(trials, a, b, shapes)
             for scene in scenes + [ALL]:
                 s = m if scene == ALL else m[m.scene == scene]
                 if s.empty:
                     continue
-                d = (s.a - s.b).to_numpy()
-                groups = [g.index.to_numpy() for _, g in s.reset_index(drop=True).groupby(["scene", "realisation"])]
-                boot = _bootstrap_means(d, groups, rng)
-                n01, n10 = int(((s.a == 0) & (s.b == 1)).sum()), int(((s.a == 1) & (s.b == 0)).sum())
-                p = stats.binomtest(n10, n10 + n01, 0.5).pvalue if n10 + n01 else 1.0
-                rows.append({"scene": scene, "shapes": shapes, "planner": a, "versus": b, "pairs": len(d),
-                             "difference": float(d.mean()), "ci_low": float(np.percentile(boot, 2.5)),
-                             "ci_high": float(np.percentile(boot, 97.5)), "only_planner": n10, "only_versus": n01,
-                             "mcnemar_p": float(p)})
+                diff = paired_difference((s.a - s.b).to_numpy(), cell_groups(s), rng)
+                n10, n01, p = mcnemar(s.a.to_numpy(), s.b.to_numpy())
+                rows.append({"scene": scene, "shapes": shapes, "planner": a, "versus": b, **diff,
+                             "only_planner": n10, "only_versus": n01, "mcnemar_p": p})
     return pd.DataFrame(rows)
 
 
