@@ -228,6 +228,14 @@ def _print_report(out: Path, figures: bool) -> None:
     print(f"\ntables and figures in {out}", file=sys.stderr)
 
 
+def _compare(args) -> int:
+    from harness.compare import as_json, as_markdown, compare
+
+    result = compare(Path(args.dir_a), Path(args.dir_b))
+    print(json.dumps(as_json(result), default=str) if args.json else as_markdown(result))
+    return 0
+
+
 def _planners_list(args) -> int:
     from planners.registry import available
 
@@ -395,6 +403,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("dir", help="results folder written by eval")
     p.add_argument("--no-figures", action="store_true", help="tables only")
     p.set_defaults(func=_report)
+
+    p = sub.add_parser("compare", help="paired comparison of two runs of one experiment (B - A)")
+    p.add_argument("dir_a", metavar="DIR_A", help="results folder of run A (the reference)")
+    p.add_argument("dir_b", metavar="DIR_B", help="results folder of run B (the same experiment, changed)")
+    p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    p.set_defaults(func=_compare)
 
     bench = sub.add_parser("bench", help="benchmarks, measured as ratios in one run")
     bench.add_argument("which", nargs="?", default="all",

@@ -361,3 +361,23 @@ def test_physics_overrides_reach_the_protocol(tmp_path):
     protocol = load_config(path).protocol()
     assert (protocol.cone_friction, protocol.solver_iterations) == (False, 80)
     assert load_config(_write(tmp_path, '[[planners]]\nname = "gp-p"', "cone.toml")).protocol().cone_friction
+
+
+def test_compare_pairs_two_runs_that_differ_in_physics_only(tiny_run, tmp_path, capsys):
+    """The documented check of a result's numerical robustness: the same experiment with
+    twice the solver iterations plans the same grasps and pairs every trial; a run
+    compared with itself changes nothing."""
+    from harness.compare import compare
+
+    _, out = tiny_run
+    finer = tmp_path / "finer"
+    config = _write(tmp_path, TINY.replace("batch_size = 4", "batch_size = 4\nsolver_iterations = 100"))
+    assert _eval(config, finer, "--workers", "2", "--no-report") == 0
+    result = compare(out, finer)
+    assert result["differences"] == {"physics": [{}, {"solver_iterations": 100}]}
+    assert result["plans"] == {label: {"plans": 2, "identical": 2} for label in ("mean-shape", "gp-p", "opt")}
+    assert result["trials"] == {"a": 48, "b": 48, "paired": 48}
+    same = compare(out, out)["cells"]
+    assert (same.difference == 0).all() and (same.agreement == 1).all() and (same.mcnemar_p == 1).all()
+    assert main(["compare", str(out), str(finer)]) == 0
+    assert "solver_iterations" in capsys.readouterr().out
