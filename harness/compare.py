@@ -22,7 +22,7 @@ import numpy as np
 import pandas as pd
 
 from harness.errors import InputError
-from harness.report import ALL, comparison_pairs, expected, load, mcnemar, paired_difference
+from harness.report import ALL, comparison_pairs, expected, load, mcnemar, paired_difference, row_groups
 
 #: Config fields that decide the draws: runs that differ in one are not paired.
 PAIRING_FIELDS = ("seed", "realisations", "analytic_draws", "posterior_trials", "truth_trials", "sigma_g",
@@ -104,9 +104,7 @@ def _cells(trials: pd.DataFrame, scenes: list[str], planners: list[str], rng: np
         t = trials[mask]
         if t.empty:
             continue
-        # Trials share a plan within (scene, realisation, planner, shapes): resample within those.
-        groups = [g.index.to_numpy() for _, g in
-                  t.reset_index(drop=True).groupby(["scene", "realisation", "planner", "shapes"])]
+        groups = row_groups(t, ["scene", "realisation", "planner", "shapes"])
         diff = paired_difference((t.b - t.a).to_numpy(), groups, rng)
         only_a, only_b, p = mcnemar(t.a.to_numpy(), t.b.to_numpy())
         rows.append({"scene": scene, "planner": planner, "shapes": shapes, "pairs": diff.pop("pairs"),
@@ -133,8 +131,7 @@ def _planner_shifts(trials: pd.DataFrame, config: dict, planners: list[str],
             if m.empty:
                 continue
             da, db = (m.a_x - m.a_y).to_numpy(), (m.b_x - m.b_y).to_numpy()
-            groups = [g.index.to_numpy() for _, g in m.groupby(["scene", "realisation", "shapes"])]
-            shift = paired_difference(db - da, groups, rng)
+            shift = paired_difference(db - da, row_groups(m, ["scene", "realisation", "shapes"]), rng)
             rows.append({"planner": x, "versus": y, "shapes": shapes, "pairs": shift["pairs"],
                          "difference_a": float(da.mean()), "difference_b": float(db.mean()),
                          "shift": shift["difference"], "shift_ci_low": shift["ci_low"],

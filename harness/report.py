@@ -125,9 +125,11 @@ def mcnemar(a: np.ndarray, b: np.ndarray) -> tuple[int, int, float]:
     return only_a, only_b, float(p)
 
 
-def cell_groups(frame: pd.DataFrame) -> list[np.ndarray]:
-    """Row positions of ``frame`` by (scene, realisation): the trials that share a plan."""
-    return [g.index.to_numpy() for _, g in frame.reset_index(drop=True).groupby(["scene", "realisation"])]
+def row_groups(frame: pd.DataFrame, keys: list[str]) -> list[np.ndarray]:
+    """Row positions of ``frame`` grouped by ``keys`` (for :func:`paired_difference`: the
+    trials of one plan, by (scene, realisation), adding planner or shapes where a frame
+    mixes them)."""
+    return [g.index.to_numpy() for _, g in frame.reset_index(drop=True).groupby(keys)]
 
 
 def comparisons(data: dict, seed: int = 0) -> pd.DataFrame:
@@ -146,7 +148,7 @@ def comparisons(data: dict, seed: int = 0) -> pd.DataFrame:
                 s = m if scene == ALL else m[m.scene == scene]
                 if s.empty:
                     continue
-                diff = paired_difference((s.a - s.b).to_numpy(), cell_groups(s), rng)
+                diff = paired_difference((s.a - s.b).to_numpy(), row_groups(s, ["scene", "realisation"]), rng)
                 n10, n01, p = mcnemar(s.a.to_numpy(), s.b.to_numpy())
                 rows.append({"scene": scene, "shapes": shapes, "planner": a, "versus": b, **diff,
                              "only_planner": n10, "only_versus": n01, "mcnemar_p": p})
