@@ -154,8 +154,9 @@ def parse_config(data: dict, source: str, base_dir: Path, default_name: str = "e
         protocol["solver_iterations"] = phys.integer("solver_iterations", None, lo=1, hi=10_000)
     if "time_step" in protocol and protocol["time_step"] > 0.01:
         raise phys.error("time_step", f"{protocol['time_step']} s is too coarse (at most 0.01 s)")
-    if "cone_friction" in phys.data:
-        protocol["cone_friction"] = phys.boolean("cone_friction")
+    for key in ("cone_friction", "table_hull"):
+        if key in phys.data:
+            protocol[key] = phys.boolean(key)
     batch = phys.integer("batch_size", 16, lo=1, hi=64)
     phys.finish()
 

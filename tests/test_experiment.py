@@ -21,6 +21,7 @@ from hypothesis import strategies as st
 
 from harness.cli import main
 from harness.experiment import load_config
+from harness.physics.trial import Protocol
 from harness.report import SUMMARY_COLUMNS
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -239,6 +240,7 @@ BAD_CONFIGS = [
     ('[evaluation]\nposterior_trials = 1.5\n[[planners]]\nname = "gp-p"', "evaluation.posterior_trials"),
     ('[physics]\ntime_step = 0.5\n[[planners]]\nname = "gp-p"', "physics.time_step"),
     ('[physics]\ncone_friction = 0\n[[planners]]\nname = "gp-p"', "physics.cone_friction"),
+    ('[physics]\ntable_hull = "yes"\n[[planners]]\nname = "gp-p"', "physics.table_hull"),
     ('colour = "red"\n[[planners]]\nname = "gp-p"', "colour"),
     ('[[planners]]\nname = "gp-p"\n[[planners]]\nname = "gp-p"', "planners[1].label"),
     ('[gripper]\nopening = 0\n[[planners]]\nname = "gp-p"', "gripper.opening"),
@@ -273,7 +275,7 @@ _keys = st.sampled_from(["seed", "scenes", "realisations", "name", "evaluation.a
                          "evaluation.posterior_trials", "evaluation.truth_trials", "evaluation.sigma_g",
                          "evaluation.friction", "evaluation.time_budget_s", "physics.time_step",
                          "physics.solver_iterations", "physics.batch_size", "physics.cone_friction",
-                         "gripper.opening", "gripper.force",
+                         "physics.table_hull", "gripper.opening", "gripper.force",
                          "planners.name", "planners.params.candidates", "bogus"])
 
 
@@ -361,6 +363,9 @@ def test_physics_overrides_reach_the_protocol(tmp_path):
     protocol = load_config(path).protocol()
     assert (protocol.cone_friction, protocol.solver_iterations) == (False, 80)
     assert load_config(_write(tmp_path, '[[planners]]\nname = "gp-p"', "cone.toml")).protocol().cone_friction
+    flipped = str(not Protocol().table_hull).lower()
+    path = _write(tmp_path, f'[physics]\ntable_hull = {flipped}\n[[planners]]\nname = "gp-p"', "foot.toml")
+    assert load_config(path).protocol().table_hull is not Protocol().table_hull
 
 
 def test_compare_pairs_two_runs_that_differ_in_physics_only(tiny_run, tmp_path, capsys):

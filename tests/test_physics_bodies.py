@@ -192,3 +192,50 @@ def test_a_rebuilt_shape_gives_the_same_body_and_a_swapped_decomposition_is_hono
     mass, com = _body_mass_and_com(client, cut.body_id)
     assert mass == pytest.approx(400.0 * 0.03 * bar.area, rel=1e-9)
     assert com == pytest.approx([2.0, 0.0, 0.015], abs=1e-9)
+
+
+def test_a_foot_carries_the_weight_on_the_hull_corners_at_the_true_height(client):
+    """With a foot, the U of the test above rests on its convex hull's slab alone: at the
+    same height, with the same mass and centre of mass (the foot is massless), on at most
+    4 contact points, each at a corner of the hull (the outer corners of the U, less the
+    1 mm margin), and those points carry the whole weight."""
+    plane_shape = pb.createCollisionShape(pb.GEOM_PLANE, physicsClientId=client)
+    plane = pb.createMultiBody(0, plane_shape, physicsClientId=client)
+    u_shape = box(-0.06, -0.03, 0.06, 0.03).difference(box(-0.02, -0.01, 0.02, 0.04))
+    body = create_body(client, u_shape, 0.03, 800.0, 0.5, foot=True)
+    assert body.foot == 0 and pb.getNumJoints(body.body_id, physicsClientId=client) == 1
+    pb.setCollisionFilterPair(body.body_id, plane, -1, -1, 0, physicsClientId=client)
+    mass, com = _body_mass_and_com(client, body.body_id)
+    assert mass == pytest.approx(800.0 * 0.03 * u_shape.area, rel=1e-9)
+    assert com[:2] == pytest.approx([u_shape.centroid.x, u_shape.centroid.y], abs=1e-9)
+    for _ in range(240):
+        pb.stepSimulation(physicsClientId=client)
+    z = pb.getBasePositionAndOrientation(body.body_id, physicsClientId=client)[0][2]
+    assert z == pytest.approx(0.015, abs=2e-4)
+    points = pb.getContactPoints(body.body_id, plane, physicsClientId=client)
+    assert 3 <= len(points) <= 4 and {p[3] for p in points} == {0}
+    corners = np.array([(x, y) for x in (-0.059, 0.059) for y in (-0.029, 0.029)])
+    for p in points:
+        assert np.min(np.hypot(*(corners - np.asarray(p[5][:2])).T)) < 5e-4, p[5]
+    assert sum(p[9] for p in points) == pytest.approx(mass * 9.81, rel=0.02)
+
+
+def test_the_jaws_pass_through_the_foot_and_grip_the_prism():
+    """A jaw that starts in the U's notch (inside the hull, outside the polygon) closes on
+    the arm as if the foot were not there: the grip width is the arm's 4 cm with the foot
+    and without it, and both grips hold."""
+    from harness.physics.gripper import GripperSpec
+    from harness.physics.trial import Protocol, Trial
+
+    gripper = GripperSpec(opening=0.1, jaw_width=0.01, plate_height=0.01, force=20.0, closing_speed=0.05,
+                          object_thickness=0.03).adapter()
+    u_shape = box(-0.06, -0.03, 0.06, 0.03).difference(box(-0.02, -0.01, 0.02, 0.04))
+    trial = Trial(u_shape, (0.0, 0.015), (0.085, 0.015), (1.0, 0.0), 0.03, 400.0, 0.5, gripper)
+    widths, outcomes = [], []
+    for foot in (False, True):
+        with Runner(Protocol(table_hull=foot)) as runner:
+            result = runner.run([trial])[0]
+        widths.append(result.grip_width)
+        outcomes.append(result.outcome)
+    assert widths == pytest.approx([0.04, 0.04], abs=1e-3)
+    assert outcomes == ["success", "success"]

@@ -129,12 +129,19 @@ def _area_moments(poly: Polygon):
 @dataclass(frozen=True)
 class Body:
     """An object in a pybullet world: its id, the polygon and pieces it was built from,
-    and the mass properties of the whole prism (in the polygon's frame)."""
+    the mass properties of the whole prism (in the polygon's frame), and the link index
+    of its foot (None without one; see :func:`create_body`)."""
 
     body_id: int
     polygon: Polygon
     pieces: tuple
     mass: MassProperties
+    foot: int | None = None
+
+
+#: Height of the foot slab above the object's base (m); it only meets the table, so any
+#: height works that stays inside the prism.
+FOOT_HEIGHT = 0.002
 
 
 #: Bullet's default collision margin of a convex hull (m); see :func:`_core`.
@@ -144,7 +151,7 @@ OBJECT_RGBA = (0.85, 0.45, 0.15, 1.0)
 
 
 def create_body(client: int, polygon: Polygon, thickness: float, density: float, friction: float,
-                origin=(0.0, 0.0), visual: bool = False) -> Body:
+                origin=(0.0, 0.0), visual: bool = False, foot: bool = False) -> Body:
     """The polygon extruded to a prism of ``thickness`` lying on the table (z = 0), its
     frame shifted by ``origin`` (x, y), as one rigid body: a single pybullet base whose
     collision shape is the compound of the convex pieces, with the exact mass, centre of
@@ -153,7 +160,17 @@ def create_body(client: int, polygon: Polygon, thickness: float, density: float,
 
     One base, not one fixed link per piece: the fidelity study (docs/physics.md) found
     that a convex shape cut into fixed links behaved unlike the same shape in one piece
-    (agreement 0.89), while the compound agreed with it (0.97, chaos level)."""
+    (agreement 0.89), while the compound agreed with it (0.97, chaos level).
+
+    ``foot``: the body also gets a massless link, fixed to the base, whose collision
+    shape is a FOOT_HEIGHT slab over the polygon's convex hull at the prism's bottom
+    (link index 0). The caller makes the foot the only part that meets the table and
+    keeps it from meeting anything else (:meth:`harness.physics.trial.Runner`): the
+    object then rests on at most 4 contact points (one manifold) instead of up to 4 per
+    piece. For a prism tilted by less than 90 degrees the lowest point of the hull slab
+    is the lowest point of the prism (a hull vertex is a vertex of the polygon's bottom
+    ring), so where the object touches the table does not change; only how many points
+    share its weight when it lies flat (docs/physics.md, "The foot")."""
     recipe = _recipe(polygon, thickness, density, convex_pieces)
     path = _mesh_file(recipe.mesh)
     try:
@@ -169,26 +186,36 @@ def create_body(client: int, polygon: Polygon, thickness: float, density: float,
             vertices += ring
         look = pb.createVisualShape(pb.GEOM_MESH, vertices=vertices, indices=indices, rgbaColor=OBJECT_RGBA,
                                     physicsClientId=client)
+    links = {}
+    if foot:
+        slab = pb.createCollisionShape(pb.GEOM_MESH, vertices=recipe.foot, physicsClientId=client)
+        links = dict(linkMasses=[0.0], linkCollisionShapeIndices=[slab], linkVisualShapeIndices=[-1],
+                     linkPositions=[[0.0, 0.0, 0.0]], linkOrientations=[[0.0, 0.0, 0.0, 1.0]],
+                     linkInertialFramePositions=[[0.0, 0.0, 0.0]], linkInertialFrameOrientations=[[0.0, 0.0, 0.0, 1.0]],
+                     linkParentIndices=[0], linkJointTypes=[pb.JOINT_FIXED], linkJointAxis=[[0.0, 0.0, 1.0]])
     body = pb.createMultiBody(baseMass=recipe.props.mass, baseCollisionShapeIndex=shape, baseVisualShapeIndex=look,
                               basePosition=[float(origin[0]), float(origin[1]), 0.0],
                               baseInertialFramePosition=recipe.props.com.tolist(),
-                              baseInertialFrameOrientation=recipe.principal_axes, physicsClientId=client)
+                              baseInertialFrameOrientation=recipe.principal_axes, physicsClientId=client, **links)
     pb.changeDynamics(body, -1, localInertiaDiagonal=recipe.moments, lateralFriction=friction,
                       physicsClientId=client)
-    return Body(body, polygon, recipe.pieces, recipe.props)
+    if foot:
+        pb.changeDynamics(body, 0, lateralFriction=friction, physicsClientId=client)
+    return Body(body, polygon, recipe.pieces, recipe.props, 0 if foot else None)
 
 
 @dataclass(frozen=True)
 class _Recipe:
     """Everything a body is built from that depends only on its shape: the convex
     pieces, the compound's OBJ text, the mass properties, the principal moments and the
-    principal axes (a quaternion)."""
+    principal axes (a quaternion), and the vertices of the foot slab."""
 
     pieces: tuple
     mesh: str
     props: MassProperties
     moments: list
     principal_axes: list
+    foot: list
 
 
 @lru_cache(maxsize=256)
@@ -203,7 +230,10 @@ def _recipe(polygon: Polygon, thickness: float, density: float, decompose) -> _R
     moments, axes = np.linalg.eigh(props.inertia)
     if np.linalg.det(axes) < 0:
         axes[:, 0] *= -1
-    return _Recipe(pieces, mesh, props, moments.tolist(), _quaternion(axes))
+    hull, margin = _core(polygon.convex_hull, thickness)
+    z0 = min(margin, 0.25 * thickness)
+    foot = _prism_vertices(hull, z0, z0 + min(FOOT_HEIGHT, thickness - 2 * z0))
+    return _Recipe(pieces, mesh, props, moments.tolist(), _quaternion(axes), foot)
 
 
 def _compound_text(cores: list, thickness: float) -> str:

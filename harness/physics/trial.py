@@ -61,6 +61,7 @@ class Protocol:
     table_friction: float = 0.5      # the object carries 1, so this is object-table friction
     friction_anchor: bool = True     # Bullet's friction anchors: static friction without creep
     cone_friction: bool = True       # the exact Coulomb cone; False: Bullet's pyramid (faster, anisotropic)
+    table_hull: bool = True          # the object meets the table through its convex hull's foot, not its pieces
     check_interval: float = 1.0 / 60.0  # s between contact checks while lifting and shaking
     held_distance: float = 0.001     # m: a jaw this close to the object touches it
     lost_distance: float = 0.005     # m: an object this far from both jaws ...
@@ -304,8 +305,9 @@ class _Slot:
         c, t, g = self.runner.client, self.trial, self.trial.gripper
         p = self.runner.protocol
         ox, oy = self.origin
-        self.obj = create_body(c, t.polygon, t.thickness, t.density, 1.0, origin=self.origin,
-                               visual=self.camera is not None).body_id
+        body = create_body(c, t.polygon, t.thickness, t.density, 1.0, origin=self.origin,
+                           visual=self.camera is not None, foot=p.table_hull)
+        self.obj, self.foot = body.body_id, body.foot
         for link in range(-1, pb.getNumJoints(self.obj, physicsClientId=c)):
             pb.changeDynamics(self.obj, link, frictionAnchor=int(p.friction_anchor), physicsClientId=c)
         g1, g2 = np.asarray(t.g1), np.asarray(t.g2)
@@ -323,6 +325,10 @@ class _Slot:
             pb.changeDynamics(self.grip, link, lateralFriction=t.friction, frictionAnchor=int(p.friction_anchor),
                               physicsClientId=c)
             pb.setCollisionFilterPair(self.grip, self.runner.table, link, -1, 0, physicsClientId=c)
+            if self.foot is not None:
+                pb.setCollisionFilterPair(self.obj, self.grip, self.foot, link, 0, physicsClientId=c)
+        if self.foot is not None:  # the foot alone meets the table, and nothing else
+            pb.setCollisionFilterPair(self.obj, self.runner.table, -1, -1, 0, physicsClientId=c)
         # Free travel is skipped: both jaws start SKIP_MARGIN short of the first contact,
         # which they would have reached at the same moment, with nothing yet touched.
         skip = max(0.0, min(free_travel(t), 0.5 * width) - SKIP_MARGIN) if p.skip_free_travel else 0.0
@@ -455,7 +461,10 @@ class _Slot:
     def _near_jaws(self, distance: float) -> int:
         """How many of the two jaws are within ``distance`` of the object (closest points,
         not Bullet's contact manifold, which can drop points while an object pivots)."""
-        points = pb.getClosestPoints(self.obj, self.grip, distance, physicsClientId=self.runner.client)
+        if self.foot is None:
+            points = pb.getClosestPoints(self.obj, self.grip, distance, physicsClientId=self.runner.client)
+        else:  # the prism, not its foot
+            points = pb.getClosestPoints(self.obj, self.grip, distance, linkIndexA=-1, physicsClientId=self.runner.client)
         links = {point[4] for point in points}
         return sum(link in links for link in self.trial.gripper.jaw_links)
 
