@@ -162,3 +162,34 @@ def test_the_precomputed_base_motion_matches_the_protocols_closed_forms(factor):
         assert turn == pytest.approx(p.shake_turn * a / p.shake_amplitude, abs=1e-15)
     peak = max(math.hypot(a, b) for a, b, _ in m.shake)
     assert peak == pytest.approx(p.shake_amplitude, rel=1e-4)
+
+
+def test_the_contact_manifold_shortcut_of_the_held_check_changes_no_result(monkeypatch):
+    """The held and lost checks skip the closest-points query when the contact manifold
+    already proves both jaws near. On the fidelity study's hard trial set (the first
+    candidates as drawn, on the true shapes and posterior samples of every library
+    scene: held, slipped and dropped trials) every result is the same bit for bit as with
+    the query at every check, while the query runs far less often."""
+    from harness.physics import trial as trial_module
+    from harness.physics.study import library_trials
+
+    trials = library_trials(grasps_per_scene=2, ranked=False).trials
+    queries = []
+    original = pb.getClosestPoints
+
+    def counted(*args, **kwargs):
+        queries.append(1)
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(trial_module.pb, "getClosestPoints", counted)
+    with Runner() as runner:
+        shortcut = runner.run(trials)
+    with_shortcut = len(queries)
+    monkeypatch.setattr(trial_module, "NEAR_SLACK", 1.0)  # no manifold point can prove a jaw near
+    queries.clear()
+    with Runner() as runner:
+        queried = runner.run(trials)
+    assert [repr(r.as_dict()) for r in shortcut] == [repr(r.as_dict()) for r in queried]
+    outcomes = {r.outcome for r in shortcut}
+    assert {"success", "slipped"} <= outcomes, outcomes
+    assert 0 < with_shortcut < 0.3 * len(queries), (with_shortcut, len(queries))
