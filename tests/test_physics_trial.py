@@ -164,9 +164,9 @@ def test_the_precomputed_base_motion_matches_the_protocols_closed_forms(factor):
     assert peak == pytest.approx(p.shake_amplitude, rel=1e-4)
 
 
-def test_the_contact_manifold_shortcut_of_the_held_check_changes_no_result(monkeypatch):
-    """The held and lost checks skip the closest-points query when the contact manifold
-    already proves both jaws near. On the fidelity study's hard trial set (the first
+def test_the_contact_manifold_shortcut_of_the_lost_check_changes_no_result(monkeypatch):
+    """The lost checks skip the closest-points query when the contact manifold already
+    proves both jaws near. On the fidelity study's hard trial set (the first
     candidates as drawn, on the true shapes and posterior samples of every library
     scene: held, slipped and dropped trials) every result is the same bit for bit as with
     the query at every check, while the query runs far less often."""

@@ -165,7 +165,7 @@ def create_body(client: int, polygon: Polygon, thickness: float, density: float,
     ``foot``: the body also gets a massless link, fixed to the base, whose collision
     shape is a FOOT_HEIGHT slab over the polygon's convex hull at the prism's bottom
     (link index 0). The caller makes the foot the only part that meets the table and
-    keeps it from meeting anything else (:meth:`harness.physics.trial.Runner`): the
+    keeps it from meeting anything else (the trial runner, harness.physics.trial): the
     object then rests on at most 4 contact points (one manifold) instead of up to 4 per
     piece. For a prism tilted by less than 90 degrees the lowest point of the hull slab
     is the lowest point of the prism (a hull vertex is a vertex of the polygon's bottom
