@@ -168,7 +168,7 @@ def test_the_contact_manifold_shortcut_of_the_lost_check_changes_no_result(monke
     """The lost checks skip the closest-points query when the contact manifold already
     proves both jaws near. On the fidelity study's hard trial set (the first
     candidates as drawn, on the true shapes and posterior samples of every library
-    scene: held, slipped and dropped trials) every result is the same bit for bit as with
+    scene, held and slipped trials among them) every result is the same bit for bit as with
     the query at every check, while the query runs far less often."""
     from harness.physics import trial as trial_module
     from harness.physics.study import library_trials
