@@ -141,6 +141,7 @@ def _p_f_row(scene_name: str, size: int) -> dict:
     from harness.quality import default_streams, draw_evaluation, estimate_p_f
     from harness.scene import load_scene
     from harness.seeding import stream
+    from harness.settings import resolve
 
     scene = load_scene(scene_name, overrides=_sampling_overrides(size))
     belief = build_belief(scene, stream(0, "bench", size, "sensor"))
@@ -149,8 +150,7 @@ def _p_f_row(scene_name: str, size: int) -> dict:
     draws.shapes.twist, draws.shapes.center_of_mass  # noqa: B018  (set-up counted here)
     draws_s = time.perf_counter() - t0
     grasp = Grasp.from_centre((0.0, 0.0), 0.3, 0.09)
-    gripper = scene.gripper
-    args = (grasp, draws, gripper.sigma_g, scene.physics.friction, gripper.opening, gripper.jaw_width)
+    args = (grasp, draws, resolve(scene))
     estimate = estimate_p_f(*args)[0]
     best = math.inf
     for _ in range(PF_REPEATS):
@@ -227,19 +227,19 @@ def _convergence(seed: int) -> dict:
     from harness.quality import default_streams, draw_evaluation, estimate_p_f
     from harness.scene import load_scene
     from harness.seeding import stream
+    from harness.settings import resolve
     from planners.base import Problem
     from planners.gp_gpis_opt import GPGPISOpt
     from planners.gp_p import GPP
 
     scene = load_scene(CONVERGENCE_SCENE)
-    sigma_g, friction = 1.5 * scene.grid.cell, 0.4
+    settings = resolve(scene, {"sigma_g": 1.5 * scene.grid.cell, "friction": 0.4})
     belief = build_belief(scene, stream(seed, "convergence", "sensor")).prepare()
-    problem = Problem.for_belief(belief, sigma_g=sigma_g, friction=friction)
+    problem = Problem(belief, settings)
     evaluation = draw_evaluation(belief, SAMPLES, *default_streams(seed, "convergence-evaluation"))
 
     def p_f(grasps):
-        return [e.p_f for e in estimate_p_f(grasps, evaluation, sigma_g, friction, problem.opening,
-                                            problem.jaw_width)]
+        return [e.p_f for e in estimate_p_f(grasps, evaluation, settings)]
 
     record: list = []
     GPP().plan(problem, stream(seed, "convergence", "gp-p"), record=record)
@@ -302,8 +302,7 @@ def _quality_scene(name: str) -> dict:
             t0 = time.perf_counter()
             plan = make_planner(pname).plan(problem, stream(seed, name, 0, "planner", pname))
             out["plan_s"][pname].append(time.perf_counter() - t0)
-            p_f = estimate_p_f(plan.grasp, draws, problem.sigma_g, problem.friction, problem.opening,
-                               problem.jaw_width)[0].p_f if plan.grasp is not None else 0.0
+            p_f = estimate_p_f(plan.grasp, draws, problem.settings)[0].p_f if plan.grasp is not None else 0.0
             out["p_f"][pname].append(p_f)
     out["heavy"] = out["uncertain_fraction"] >= HEAVY_FRACTION
     return out

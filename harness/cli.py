@@ -116,16 +116,18 @@ def _scenes_render(args) -> int:
 
 
 def _scene_and_grasp(args):
-    """The scene and the --grasp of a command; a grasp the gripper cannot execute is bad input."""
+    """The scene, the --grasp and the grasp settings of a command; a grasp the gripper
+    cannot execute is bad input."""
     from harness.grasp import Grasp
     from harness.scene import load_scene
 
     scene = load_scene(args.scene)
+    settings = _settings(args, scene)
     grasp = Grasp(tuple(args.grasp[:2]), tuple(args.grasp[2:]))
-    problem = grasp.problem(scene.grid, scene.gripper.opening)
+    problem = grasp.problem(scene.grid, settings.opening)
     if problem:
         raise InputError("--grasp", None, problem)
-    return scene, grasp
+    return scene, grasp, settings
 
 
 def _quality(args) -> int:
@@ -133,21 +135,19 @@ def _quality(args) -> int:
     from harness.quality import default_streams, draw_evaluation, estimate_p_f
     from harness.seeding import stream
 
-    scene, grasp = _scene_and_grasp(args)
-    sigma_g, friction = _problem_options(args, scene)
+    scene, grasp, settings = _scene_and_grasp(args)
     belief = build_belief(scene, stream(args.seed, scene.name, 0, "sensor"))
     draws = draw_evaluation(belief, args.samples, *default_streams(args.seed, scene.name))
-    est = estimate_p_f(grasp, draws, sigma_g, friction, scene.gripper.opening, scene.gripper.jaw_width,
-                       args.friction_spread)[0]
+    est = estimate_p_f(grasp, draws, settings)[0]
     if args.json:
         out = est.as_dict() | {"scene": scene.name, "grasp": {"g1": list(grasp.g1), "g2": list(grasp.g2)},
-                               "sigma_g": sigma_g, "friction": friction, "friction_spread": args.friction_spread,
-                               "seed": args.seed}
+                               "sigma_g": settings.sigma_g, "friction": settings.friction,
+                               "friction_spread": settings.friction_spread, "seed": args.seed}
         print(json.dumps(out))
     else:
         fails = ", ".join(f"{k} {v}" for k, v in est.failures.items())
         print(f"{scene.name}: P_F = {est.p_f:.3f} (95% CI {est.ci_low:.3f} to {est.ci_high:.3f}) over "
-              f"{est.samples} draws, sigma_g = {sigma_g:g} m, friction = {friction:g}")
+              f"{est.samples} draws, sigma_g = {settings.sigma_g:g} m, friction = {settings.friction:g}")
         print(f"failures: {fails}; mean Ferrari-Canny quality {est.ferrari_canny_mean:.4f}")
     return 0
 
@@ -161,18 +161,17 @@ def _simulate(args) -> int:
     from harness.quality import default_streams
     from harness.seeding import stream
 
-    scene, grasp = _scene_and_grasp(args)
+    scene, grasp, settings = _scene_and_grasp(args)
     if args.frames is not None and Path(args.frames).exists() and not Path(args.frames).is_dir():
         raise InputError("--frames", None, f"{args.frames} exists and is not a folder")
-    sigma_g, friction = _problem_options(args, scene)
-    shapes_rng, approach_rng, _ = default_streams(args.seed, scene.name)
+    shapes_rng, approach_rng, friction_rng = default_streams(args.seed, scene.name)
     if args.shapes == "posterior":
         belief = build_belief(scene, stream(args.seed, scene.name, 0, "sensor"))
         polygons = sample_polygons(belief, args.trials, shapes_rng)
     else:
         polygons = [truth_polygon(scene)]
     approach = approach_rng.standard_normal((args.trials, 2, 2))
-    trials = make_trials(scene, grasp, polygons, approach, sigma_g, friction)
+    trials = make_trials(settings, grasp, polygons, approach, friction_rng.standard_normal(args.trials))
     start = time.perf_counter()
     with Runner() as runner, tqdm(total=len(trials), unit="trial", disable=None, file=sys.stderr) as bar:
         results = runner.run(trials, frames=Path(args.frames) if args.frames else None, progress=bar.update)
@@ -180,13 +179,14 @@ def _simulate(args) -> int:
     out = summary.as_dict()
     if args.json:
         print(json.dumps(out | {"scene": scene.name, "grasp": {"g1": list(grasp.g1), "g2": list(grasp.g2)},
-                                "shapes": args.shapes, "sigma_g": sigma_g, "friction": friction,
+                                "shapes": args.shapes, "sigma_g": settings.sigma_g,
+                                "friction": settings.friction, "friction_spread": settings.friction_spread,
                                 "seed": args.seed}))
     else:
         counts = ", ".join(f"{k} {v}" for k, v in out["outcomes"].items() if v)
         print(f"{scene.name} ({args.shapes}): success {out['successes']}/{out['trials']} = "
               f"{out['success_rate']:.3f} (95% CI {out['ci_low']:.3f} to {out['ci_high']:.3f}), "
-              f"sigma_g = {sigma_g:g} m, friction = {friction:g}")
+              f"sigma_g = {settings.sigma_g:g} m, friction = {settings.friction:g}")
         print(f"outcomes: {counts}; {out['trials_per_s']:.1f} trials/s")
         if args.frames:
             print(f"frames of the first trial in {args.frames}")
@@ -257,10 +257,18 @@ def _key_value(text: str) -> tuple[str, str]:
     return key.strip(), value.strip()
 
 
-def _problem_options(args, scene):
-    sigma_g = scene.gripper.sigma_g if args.sigma_g is None else args.sigma_g
-    friction = scene.physics.friction if args.friction is None else args.friction
-    return sigma_g, friction
+def _settings(args, scene):
+    """The scene's grasp settings with the command line's --sigma-g, --friction and
+    --friction-spread where given."""
+    from harness.settings import override_problem, resolve
+
+    options = {"sigma_g": args.sigma_g, "friction": args.friction, "friction_spread": args.friction_spread}
+    given = {k: v for k, v in options.items() if v is not None}
+    for key, value in given.items():
+        problem = override_problem(key, value)
+        if problem:
+            raise InputError(f"--{key.replace('_', '-')}", None, problem)
+    return resolve(scene, given)
 
 
 def _plan(args) -> int:
@@ -273,9 +281,9 @@ def _plan(args) -> int:
 
     scene = load_scene(args.scene)
     planner = make_planner(args.planner, dict(args.param or []))  # bad input stops here, before any work
-    sigma_g, friction = _problem_options(args, scene)
+    settings = _settings(args, scene)
     belief = build_belief(scene, stream(args.seed, scene.name, 0, "sensor"))
-    problem = Problem.for_belief(belief, sigma_g=sigma_g, friction=friction, time_budget_s=args.time_budget)
+    problem = Problem(belief, settings, time_budget_s=args.time_budget)
     belief.prepare()  # the belief's grid fields are part of the belief, not of the planning time
     start = time.perf_counter()
     plan = planner.plan(problem, stream(args.seed, scene.name, 0, "planner", planner.name))
@@ -283,11 +291,12 @@ def _plan(args) -> int:
     out = {"planner": planner.name, "scene": scene.name, "seed": args.seed, "status": plan.status,
            "grasp": None, "estimate": plan.estimate, "plan_time_s": plan_time, "iterations": plan.iterations,
            "evaluations": plan.evaluations, "p_f": None, "ci_low": None, "ci_high": None,
-           "sigma_g": sigma_g, "friction": friction, "params": planner.get_params(), "message": plan.message}
+           "sigma_g": settings.sigma_g, "friction": settings.friction, "params": planner.get_params(),
+           "message": plan.message}
     if plan.grasp is not None:
         # The same evaluation draws for every planner at this seed (common random numbers).
         draws = draw_evaluation(belief, 1000, *default_streams(args.seed, scene.name))
-        est = estimate_p_f(plan.grasp, draws, sigma_g, friction, problem.opening, problem.jaw_width)[0]
+        est = estimate_p_f(plan.grasp, draws, settings)[0]
         out.update(grasp={"g1": list(plan.grasp.g1), "g2": list(plan.grasp.g2)}, p_f=est.p_f,
                    ci_low=est.ci_low, ci_high=est.ci_high)
     if args.json:
@@ -321,12 +330,14 @@ _GRASP = {"nargs": 4, "type": _coordinate, "required": True, "metavar": ("X1", "
 
 
 def _add_problem_options(p: argparse.ArgumentParser) -> None:
-    """--seed, --sigma-g and --friction, shared by plan, quality and simulate."""
+    """--seed, --sigma-g, --friction and --friction-spread, shared by plan, quality and simulate."""
     p.add_argument("--seed", type=_seed, default=0, help="experiment seed (default 0)")
     p.add_argument("--sigma-g", type=_non_negative, default=None,
                    help="approach noise std per jaw start, metres (default: the scene's gripper.sigma_g)")
     p.add_argument("--friction", type=_non_negative, default=None,
                    help="jaw-object friction coefficient (default: the scene's physics.friction)")
+    p.add_argument("--friction-spread", type=_non_negative, default=None,
+                   help="std of the friction coefficient across draws (default 0)")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -355,8 +366,6 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--grasp", **_GRASP)
     p.add_argument("--samples", type=_positive_int, default=1000, help="paired draws (default 1000)")
     _add_problem_options(p)
-    p.add_argument("--friction-spread", type=_non_negative, default=0.0,
-                   help="std of the friction coefficient across draws (default 0)")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     p.set_defaults(func=_quality)
 

@@ -25,8 +25,7 @@ from harness.errors import InputError
 from harness.report import ALL, comparison_pairs, expected, load, mcnemar, paired_difference, row_groups
 
 #: Config fields that decide the draws: runs that differ in one are not paired.
-PAIRING_FIELDS = ("seed", "realisations", "analytic_draws", "posterior_trials", "truth_trials", "sigma_g",
-                  "friction", "friction_spread", "gripper")
+PAIRING_FIELDS = ("seed", "realisations", "analytic_draws", "posterior_trials", "truth_trials", "settings")
 #: Config fields that change no result.
 IGNORED_FIELDS = ("name", "source")
 KEYS = ["scene", "realisation", "planner", "shapes", "trial"]

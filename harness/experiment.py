@@ -47,7 +47,9 @@ SHAPES = ("posterior", "truth")
 _PROTOCOL_KEYS = {"time_step": False, "lift_height": False, "lift_time": False, "hold_time": True,
                   "shake_time": True, "shake_frequency": False, "shake_amplitude": True, "shake_turn": True,
                   "table_friction": True}
-_GRIPPER_KEYS = ("opening", "jaw_width", "sigma_g", "force", "closing_speed", "plate_height")
+#: Grasp settings (harness.settings) an experiment may override, by the table that holds them.
+_SETTING_TABLES = {"evaluation": ("sigma_g", "friction", "friction_spread", "load_factor"),
+                   "gripper": ("opening", "jaw_width", "sigma_g", "force", "closing_speed", "plate_height")}
 
 
 @dataclass(frozen=True)
@@ -72,11 +74,8 @@ class ExperimentConfig:
     analytic_draws: int
     posterior_trials: int
     truth_trials: int
-    sigma_g: float | None              # None: each scene's gripper.sigma_g
-    friction: float | None             # None: each scene's physics.friction
-    friction_spread: float
     time_budget_s: float
-    gripper: dict = field(default_factory=dict)   # overrides of every scene's [gripper]
+    settings: dict = field(default_factory=dict)  # overrides of every scene's grasp settings
     physics: dict = field(default_factory=dict)   # overrides of the trial protocol
     batch_size: int = 16
 
@@ -98,12 +97,15 @@ class ExperimentConfig:
 
     @classmethod
     def from_dict(cls, d: dict) -> "ExperimentConfig":
-        """The inverse of as_dict (the ledger keeps the config as JSON)."""
-        return cls(**{**d, "scenes": tuple(d["scenes"]), "planners": tuple(PlannerEntry(**p) for p in d["planners"])})
-
-    @property
-    def scene_overrides(self) -> dict:
-        return {"gripper": dict(self.gripper)} if self.gripper else {}
+        """The inverse of as_dict (the ledger keeps the config as JSON). Configs written
+        before the settings were one field (sigma_g, friction, friction_spread and gripper
+        side by side) read as their overrides."""
+        d = dict(d)
+        legacy = {k: d.pop(k) for k in ("sigma_g", "friction", "friction_spread") if k in d}
+        settings = {**(d.pop("gripper", None) or {}), **{k: v for k, v in legacy.items() if v is not None},
+                    **d.pop("settings", {})}
+        return cls(**{**d, "settings": settings, "scenes": tuple(d["scenes"]),
+                      "planners": tuple(PlannerEntry(**p) for p in d["planners"])})
 
     def protocol(self):
         from harness.physics.trial import Protocol
@@ -137,15 +139,8 @@ def parse_config(data: dict, source: str, base_dir: Path, default_name: str = "e
     analytic = ev.integer("analytic_draws", 1000, lo=1, hi=1_000_000)
     posterior = ev.integer("posterior_trials", 100, lo=0, hi=100_000)
     truth = ev.integer("truth_trials", 50, lo=0, hi=100_000)
-    sigma_g = ev.number("sigma_g", None, lo=0.0, hi=1.0) if "sigma_g" in ev.data else None
-    friction = ev.number("friction", None, lo=0.0, hi=10.0) if "friction" in ev.data else None
-    spread = ev.number("friction_spread", 0.0, lo=0.0, hi=10.0)
     budget = ev.number("time_budget_s", 60.0, lo=0.0, hi=86_400.0, lo_open=True)
-    ev.finish()
-
-    gripper_t = root.table("gripper", required=False)
-    gripper = {k: gripper_t.number(k, None) for k in _GRIPPER_KEYS if k in gripper_t.data}
-    gripper_t.finish()
+    settings = _setting_overrides({"evaluation": ev, "gripper": root.table("gripper", required=False)})
 
     phys = root.table("physics", required=False)
     protocol = {key: phys.number(key, None, lo=0.0, lo_open=not zero_ok)
@@ -181,14 +176,30 @@ def parse_config(data: dict, source: str, base_dir: Path, default_name: str = "e
     root.finish()
 
     config = ExperimentConfig(name, source, seed, tuple(scenes), realisations, tuple(entries), analytic,
-                              posterior, truth, sigma_g, friction, spread, budget, gripper, protocol, batch)
-    for path in scenes:  # every scene must load with the overrides, before any work starts
-        try:
-            load_scene(path, config.scene_overrides)
-        except InputError as exc:
-            load_scene(path)  # a fault of the scene file itself is reported as such
-            raise InputError(source, exc.field, f"{exc.message} (for scene {Path(path).stem})") from None
+                              posterior, truth, budget, settings, protocol, batch)
+    for path in scenes:  # every scene must load, before any work starts
+        load_scene(path)
     return config
+
+
+def _setting_overrides(tables: dict) -> dict:
+    """The grasp settings a config overrides, from [evaluation] and [gripper]; a setting
+    given in both is an error (which one would win is not obvious)."""
+    from harness.settings import BOUNDS
+
+    found: dict = {}
+    for table_name, keys in _SETTING_TABLES.items():
+        t = tables[table_name]
+        for key in keys:
+            if key not in t.data:
+                continue
+            lo, hi, lo_open = BOUNDS[key]
+            value = t.number(key, None, lo=lo, hi=hi, lo_open=lo_open)
+            if key in found:
+                raise t.error(key, f"is also set in [{found[key][0]}]: set each grasp setting once")
+            found[key] = (table_name, value)
+        t.finish()
+    return {key: value for key, (_, value) in found.items()}
 
 
 def _scene_files(root: Table, base_dir: Path) -> list[str]:
@@ -224,18 +235,25 @@ def _scene_files(root: Table, base_dir: Path) -> list[str]:
 
 
 @lru_cache(maxsize=32)
-def _scene(path: str, overrides_json: str):
-    return load_scene(path, json.loads(overrides_json))
+def _scene(path: str):
+    return load_scene(path)
 
 
 def scene_of(config: ExperimentConfig, path: str):
-    return _scene(path, json.dumps(config.scene_overrides, sort_keys=True))
+    return _scene(path)
 
 
-def problem_settings(config: ExperimentConfig, scene) -> tuple[float, float]:
-    sigma_g = scene.gripper.sigma_g if config.sigma_g is None else config.sigma_g
-    friction = scene.physics.friction if config.friction is None else config.friction
-    return sigma_g, friction
+@lru_cache(maxsize=64)
+def _settings(path: str, overrides_json: str, protocol):
+    from harness.settings import resolve
+
+    return resolve(_scene(path), json.loads(overrides_json), protocol)
+
+
+def settings_of(config: ExperimentConfig, path: str):
+    """The grasp settings of a scene in this experiment: the scene's, the config's
+    overrides, and the lift of the config's physics protocol (resolved once per process)."""
+    return _settings(path, json.dumps(config.settings, sort_keys=True), config.protocol())
 
 
 @dataclass(frozen=True)
@@ -276,19 +294,18 @@ def _cell(config: ExperimentConfig, path: str, realisation: int, labels: tuple[s
     scene = scene_of(config, path)
     name = scene.name
     belief = build_belief(scene, stream(config.seed, name, realisation, "sensor")).prepare()
-    sigma_g, friction = problem_settings(config, scene)
+    settings = settings_of(config, path)
     n = max(config.analytic_draws, config.posterior_trials)
     draws = draw_evaluation(belief, n, *default_streams(config.seed, name, realisation))
     plans, analytic = [], []
     for entry in config.planners:
         if entry.label not in labels:
             continue
-        row = _plan_row(config, entry, scene, belief, realisation, sigma_g, friction)
+        row = _plan_row(config, entry, scene, belief, realisation, settings)
         plans.append(row)
         if row["executed"]:
             grasp = np.array([[row["g1x"], row["g1y"]], [row["g2x"], row["g2y"]]])
-            est = evaluate_draws(grasp, draws.first(config.analytic_draws), sigma_g, friction,
-                                 scene.gripper.opening, scene.gripper.jaw_width, config.friction_spread).estimates[0]
+            est = evaluate_draws(grasp, draws.first(config.analytic_draws), settings).estimates[0]
             analytic.append({"scene": name, "realisation": realisation, "planner": entry.label,
                              "draws": est.samples, "p_f": est.p_f, "ci_low": est.ci_low, "ci_high": est.ci_high,
                              "ferrari_canny_mean": est.ferrari_canny_mean,
@@ -306,7 +323,7 @@ class _Overtime(Exception):
     pass
 
 
-def _plan_row(config, entry: PlannerEntry, scene, belief, realisation, sigma_g, friction) -> dict:
+def _plan_row(config, entry: PlannerEntry, scene, belief, realisation, settings) -> dict:
     """Run one planner under the harness's checks; never raises for the planner's faults."""
     from harness.seeding import stream
     from planners.base import Problem
@@ -317,8 +334,7 @@ def _plan_row(config, entry: PlannerEntry, scene, belief, realisation, sigma_g, 
            "g1x": None, "g1y": None, "g2x": None, "g2y": None, "estimate": None, "plan_time_s": 0.0,
            "iterations": 0, "evaluations": 0, "trace": "[]"}
     budget = config.time_budget_s
-    problem = Problem.for_belief(belief, sigma_g=sigma_g, friction=friction,
-                                 friction_spread=config.friction_spread, time_budget_s=budget)
+    problem = Problem(belief, settings, time_budget_s=budget)
     rng = stream(config.seed, scene.name, realisation, "planner", entry.label)
     start = time.perf_counter()
     try:
@@ -345,7 +361,7 @@ def _plan_row(config, entry: PlannerEntry, scene, belief, realisation, sigma_g, 
     coords = np.asarray([grasp.g1, grasp.g2], dtype=float)
     if coords.shape == (2, 2) and np.isfinite(coords).all():
         row.update(g1x=coords[0, 0], g1y=coords[0, 1], g2x=coords[1, 0], g2y=coords[1, 1])
-    problem_text = grasp.problem(scene.grid, scene.gripper.opening) if np.isfinite(coords).all() else \
+    problem_text = grasp.problem(scene.grid, settings.opening) if np.isfinite(coords).all() else \
         "non-finite coordinates"
     if problem_text:
         row.update(status="invalid", message=f"grasp rejected: {problem_text}")
@@ -414,10 +430,8 @@ def run_batch(config: ExperimentConfig, batch: Batch) -> list[dict]:
     """The trials of one batch in one freshly reset pybullet world; rows for the ledger."""
     from harness.physics.simulate import make_trials
 
-    scene = scene_of(config, batch.scene_path)
-    sigma_g, friction = problem_settings(config, scene)
-    gammas = np.maximum(0.0, friction + config.friction_spread * batch.friction)
-    trials = make_trials(scene, np.asarray(batch.grasp), batch.polygons, batch.approach, sigma_g, gammas)
+    trials = make_trials(settings_of(config, batch.scene_path), np.asarray(batch.grasp), batch.polygons,
+                         batch.approach, batch.friction)
     results = _runner(config.protocol()).run(trials)
     return [_trial_row(batch, i, r.outcome, r.steps, r.grip_width, r.closing_turn, r.rise, r.pivot)
             for i, r in zip(batch.indices, results, strict=True)]

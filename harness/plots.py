@@ -117,9 +117,10 @@ OUTCOME_COLOURS = {"success": "tab:green", "slipped": "tab:orange", "dropped": "
                    "no_plan": "lightgray"}
 
 
-def grasps_figure(belief: Belief, grasps: dict, rng: np.random.Generator, n_blur: int = 64, title: str = ""):
+def grasps_figure(belief: Belief, grasps: dict, rng: np.random.Generator, jaw_width: float, n_blur: int = 64,
+                  title: str = ""):
     """The GPIS-Blur of one belief with each planner's grasp: jaw starts joined by the
-    closing line, a bar across each jaw of the plate's width."""
+    closing line, a bar across each jaw of the plate's width ``jaw_width``."""
     grid, scene = belief.grid, belief.scene
     half = 0.5 * grid.extent * 1e3
     fig, ax = plt.subplots(figsize=(6.2, 6.2), constrained_layout=True)
@@ -127,7 +128,7 @@ def grasps_figure(belief: Belief, grasps: dict, rng: np.random.Generator, n_blur
     ax.imshow(prob, origin="lower", extent=(-half, half, -half, half), cmap="Greys", vmin=0, vmax=1,
               interpolation="bilinear")
     _outline(ax, scene.shape, color="tab:blue", lw=1.0, ls="--")
-    w = scene.gripper.jaw_width * 1e3 / 2
+    w = jaw_width * 1e3 / 2
     for k, (label, grasp) in enumerate(grasps.items()):
         colour = PLANNER_COLOURS[k % len(PLANNER_COLOURS)]
         if grasp is None:
@@ -266,7 +267,7 @@ def report_figures(out_dir, data, summary, bins, fails) -> list:
     from pathlib import Path
 
     from harness.belief import build_belief
-    from harness.experiment import ExperimentConfig, scene_of
+    from harness.experiment import ExperimentConfig, scene_of, settings_of
     from harness.seeding import stream
 
     folder = Path(out_dir) / "figures"
@@ -304,6 +305,7 @@ def report_figures(out_dir, data, summary, bins, fails) -> list:
             ok = row is not None and pd.notna(row.g1x)  # a plan without a grasp reads as NaN or None
             grasps[entry.label] = ((row.g1x, row.g1y), (row.g2x, row.g2y)) if ok else None
         fig = grasps_figure(belief, grasps, stream(config.seed, scene.name, 0, "blur"),
+                            settings_of(config, path).jaw_width,
                             title=f"{scene.name}, realisation 0: GPIS-Blur and the planners' grasps\n"
                                   "blue dashed: true shape; bars: jaw plates at their start points")
         save(fig, f"grasps-{scene.name}.png")

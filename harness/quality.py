@@ -11,6 +11,7 @@ import numpy as np
 from harness.belief import Belief
 from harness.grasp import (DEGENERATE, MISSED, OK, TOO_WIDE, Grasp, SDFBatch, ferrari_canny, find_contacts,
                            force_closure)
+from harness.settings import GraspSettings
 
 #: Failure reasons, in the order a draw is classified (the first that applies).
 FAILURE_REASONS = ("too_wide", "missed", "degenerate_normal", "friction_cone")
@@ -106,8 +107,7 @@ class DrawOutcomes:
                 for g in range(len(k))]
 
 
-def evaluate_draws(grasps, draws: EvaluationDraws, sigma_g: float, friction: float, opening: float,
-                   jaw_width: float, friction_spread: float = 0.0) -> DrawOutcomes:
+def evaluate_draws(grasps, draws: EvaluationDraws, settings: GraspSettings) -> DrawOutcomes:
     """Judge G grasps ((G, 2, 2) jaw starts, or Grasp objects) on every paired draw.
 
     Draw i perturbs g1 and g2 by sigma_g times its approach deviates, uses shape sample
@@ -120,10 +120,10 @@ def evaluate_draws(grasps, draws: EvaluationDraws, sigma_g: float, friction: flo
     """
     starts = as_starts(grasps)
     g, n = len(starts), len(draws)
-    g1, g2 = executed_starts(starts, draws.approach, sigma_g, opening)
+    g1, g2 = executed_starts(starts, draws.approach, settings)
     field = np.tile(np.arange(n), g)
-    gamma = np.tile(np.maximum(0.0, friction + friction_spread * draws.friction), g)
-    contacts = find_contacts(draws.shapes, g1, g2, jaw_width, field_index=field)
+    gamma = np.tile(settings.frictions(draws.friction), g)
+    contacts = find_contacts(draws.shapes, g1, g2, settings.jaw_width, field_index=field)
     ok = contacts.status == OK
     closure = np.zeros(g * n, dtype=bool)
     quality = np.zeros(g * n)
@@ -140,10 +140,9 @@ def evaluate_draws(grasps, draws: EvaluationDraws, sigma_g: float, friction: flo
     return DrawOutcomes(closure.reshape(g, n), reason.reshape(g, n), quality.reshape(g, n))
 
 
-def estimate_p_f(grasps, draws: EvaluationDraws, sigma_g: float, friction: float, opening: float,
-                 jaw_width: float, friction_spread: float = 0.0) -> list[QualityEstimate]:
+def estimate_p_f(grasps, draws: EvaluationDraws, settings: GraspSettings) -> list[QualityEstimate]:
     """P_F estimates of G grasps on the same paired draws (see :func:`evaluate_draws`)."""
-    return evaluate_draws(grasps, draws, sigma_g, friction, opening, jaw_width, friction_spread).estimates
+    return evaluate_draws(grasps, draws, settings).estimates
 
 
 def as_starts(grasps) -> np.ndarray:
@@ -154,15 +153,15 @@ def as_starts(grasps) -> np.ndarray:
     return np.asarray(grasps, dtype=float).reshape(-1, 2, 2)
 
 
-def executed_starts(starts: np.ndarray, approach: np.ndarray, sigma_g: float, opening: float):
+def executed_starts(starts: np.ndarray, approach: np.ndarray, settings: GraspSettings):
     """The jaw starts executed under approach noise: each of G planned grasps (G, 2, 2)
     with each of n draws of standard-normal deviates (n, 2, 2), g1 and g2 each moved by
     sigma_g times its deviate, then narrowed to the opening. Returns g1, g2, each
     (G * n, 2), grasp-major. The analytic P_F and the physics trials both use this."""
     starts = np.asarray(starts, dtype=float).reshape(-1, 2, 2)
-    g1 = (starts[:, None, 0, :] + sigma_g * approach[None, :, 0, :]).reshape(-1, 2)
-    g2 = (starts[:, None, 1, :] + sigma_g * approach[None, :, 1, :]).reshape(-1, 2)
-    return within_opening(g1, g2, opening)
+    g1 = (starts[:, None, 0, :] + settings.sigma_g * approach[None, :, 0, :]).reshape(-1, 2)
+    g2 = (starts[:, None, 1, :] + settings.sigma_g * approach[None, :, 1, :]).reshape(-1, 2)
+    return within_opening(g1, g2, settings.opening)
 
 
 def within_opening(g1: np.ndarray, g2: np.ndarray, opening: float):

@@ -27,6 +27,7 @@ from shapely.geometry.base import BaseGeometry
 from harness.errors import InputError
 from harness.geometry import Grid, grid_sdf, grid_sdf_gradient, inside_region, largest_region, polygons
 from harness.sensor import REGION_KINDS, Region, SensorModel
+from harness.settings import BOUNDS
 
 LIBRARY = Path(os.environ.get("GPIS_HARNESS_SCENES", Path(__file__).resolve().parent.parent / "scenes"))
 
@@ -181,23 +182,26 @@ def parse_scene(data: dict, source: str, base_dir: Path, default_name: str = "sc
 
     p = root.table("physics", required=False)
     physics = Physics(
-        thickness=p.length("thickness", cell, default=Physics.thickness, lo=0.0, hi=1.0),
-        density=p.number("density", Physics.density, lo=1.0, hi=30000.0),
-        friction=p.number("friction", Physics.friction, lo=0.0, hi=10.0),
+        thickness=p.length("thickness", cell, default=Physics.thickness, **_range("thickness")),
+        density=p.number("density", Physics.density, **_range("density")),
+        friction=p.number("friction", Physics.friction, **_range("friction")),
     )
     p.finish()
     gr = root.table("gripper", required=False)
-    gripper = Gripper(
-        opening=gr.length("opening", cell, default=Gripper.opening, lo=0.0, hi=10.0),
-        jaw_width=gr.length("jaw_width", cell, default=Gripper.jaw_width, lo=0.0, hi=10.0),
-        sigma_g=gr.length("sigma_g", cell, default=Gripper.sigma_g, lo=0.0, hi=1.0, lo_open=False),
-        force=gr.number("force", Gripper.force, lo=0.0, hi=1e4, lo_open=True),
-        closing_speed=gr.number("closing_speed", Gripper.closing_speed, lo=0.0, hi=10.0, lo_open=True),
-        plate_height=gr.length("plate_height", cell, default=Gripper.plate_height, lo=0.0, hi=1.0),
-    )
+    gripper = Gripper(**{key: (gr.number(key, getattr(Gripper, key), **_range(key))
+                               if key in ("force", "closing_speed") else
+                               gr.length(key, cell, default=getattr(Gripper, key), **_range(key)))
+                         for key in ("opening", "jaw_width", "sigma_g", "force", "closing_speed", "plate_height")})
     gr.finish()
     root.finish()
     return Scene(name, description, source, grid, shape, truncation, sensor, gpis, physics, gripper)
+
+
+def _range(name: str) -> dict:
+    """The range of a grasp setting (harness.settings.BOUNDS) as keyword arguments of
+    Table.length or Table.number."""
+    lo, hi, lo_open = BOUNDS[name]
+    return {"lo": lo, "hi": hi, "lo_open": lo_open}
 
 
 # ---------------------------------------------------------------------------

@@ -95,7 +95,7 @@ def _check_plan(plan, problem, where: str, plan_type, statuses) -> None:
     if plan.grasp is not None:
         g = plan.grasp.array
         _require(np.all(np.isfinite(g)), f"{where}: grasp has non-finite coordinates {g.tolist()}")
-        problem_text = plan.grasp.problem(problem.belief.grid, problem.opening)
+        problem_text = plan.grasp.problem(problem.belief.grid, problem.settings.opening)
         _require(problem_text is None, f"{where}: invalid grasp: {problem_text}")
     _require(plan.estimate is None or (math.isfinite(plan.estimate)),
              f"{where}: estimate must be a finite number or None")

@@ -28,6 +28,7 @@ import numpy as np
 
 from harness.belief import Belief
 from harness.grasp import Grasp
+from harness.settings import GraspSettings, resolve
 
 #: What a Plan's status may say.
 STATUSES = ("ok", "budget", "no_surface", "no_candidate", "infeasible", "error")
@@ -35,26 +36,19 @@ STATUSES = ("ok", "budget", "no_surface", "no_candidate", "infeasible", "error")
 
 @dataclass(frozen=True)
 class Problem:
-    """What a planner must solve: the shape belief, the gripper (opening, jaw width),
-    Coulomb friction (and its spread across draws), approach noise sigma_g (metres, per
-    jaw start) and an optional time budget in seconds."""
+    """What a planner must solve: the shape belief, the grasp's settings (gripper, friction
+    and its spread, approach noise sigma_g, the object's extrusion and the lift; see
+    harness.settings.GraspSettings) and an optional time budget in seconds."""
 
     belief: Belief
-    opening: float
-    jaw_width: float
-    friction: float
-    sigma_g: float
-    friction_spread: float = 0.0
+    settings: GraspSettings
     time_budget_s: float | None = None
 
     @classmethod
-    def for_belief(cls, belief: Belief, sigma_g: float | None = None, friction: float | None = None,
-                   friction_spread: float = 0.0, time_budget_s: float | None = None) -> "Problem":
-        """The problem of a belief with its scene's gripper and friction unless given."""
-        scene = belief.scene
-        return cls(belief, scene.gripper.opening, scene.gripper.jaw_width,
-                   scene.physics.friction if friction is None else friction,
-                   scene.gripper.sigma_g if sigma_g is None else sigma_g, friction_spread, time_budget_s)
+    def for_belief(cls, belief: Belief, settings: GraspSettings | None = None,
+                   time_budget_s: float | None = None) -> "Problem":
+        """The problem of a belief with the given settings, by default its scene's."""
+        return cls(belief, settings if settings is not None else resolve(belief.scene), time_budget_s)
 
 
 @dataclass(frozen=True)

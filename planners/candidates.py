@@ -10,6 +10,7 @@ from scipy import ndimage
 from harness.belief import Belief
 from harness.grasp import interpolate, read_lines
 from harness.geometry import polygons
+from harness.settings import GraspSettings
 
 #: Parallel lines across the plate used to place the jaws (edges and middle).
 LINES = 3
@@ -37,8 +38,8 @@ def surface_points(belief: Belief, n: int, rng: np.random.Generator) -> np.ndarr
     return segments[seg, 0] + frac * (segments[seg, 1] - segments[seg, 0])
 
 
-def generate(belief: Belief, n: int, rng: np.random.Generator, opening: float, jaw_width: float,
-             sigma_g: float, angular_noise: float = np.radians(10.0), attempts: int = 4) -> np.ndarray:
+def generate(belief: Belief, n: int, rng: np.random.Generator, settings: GraspSettings,
+             angular_noise: float = np.radians(10.0), attempts: int = 4) -> np.ndarray:
     """Up to n candidate grasps as jaw starts (G, 2, 2), G <= n, in the order drawn.
 
     From each surface point p the axis u points towards the mean shape's centre of mass
@@ -63,12 +64,13 @@ def generate(belief: Belief, n: int, rng: np.random.Generator, opening: float, j
     u = np.column_stack([c * u[:, 0] - s * u[:, 1], s * u[:, 0] + c * u[:, 1]])
 
     h = grid.cell
-    gap = clearance(belief, sigma_g)
+    opening = settings.opening
+    gap = clearance(belief, settings.sigma_g)
     reach = opening  # no valid grasp extends further than the opening from p
     steps = int(np.ceil(2 * reach / (0.5 * h))) + 1
     ts = np.linspace(-reach, reach, steps)
     perp = np.column_stack([-u[:, 1], u[:, 0]])
-    offsets = np.linspace(-0.5 * jaw_width, 0.5 * jaw_width, LINES)
+    offsets = np.linspace(-0.5 * settings.jaw_width, 0.5 * settings.jaw_width, LINES)
     starts = (p - reach * u)[:, None, :] + offsets[None, :, None] * perp[:, None, :]
     inside = (read_lines(mean, np.zeros(count, dtype=np.int64), starts, 2 * reach * u, (ts + reach) / (2 * reach))
               <= 0).any(axis=1)  # (count, T)

@@ -65,10 +65,11 @@ class GPGPISOpt(Planner):
         if belief.mean_shape.is_empty:
             return Plan.without_grasp("no_surface", "the posterior mean has no inside", seconds=clock.phases)
         init_rng, rerank_rng = rng.spawn(2)
-        grasps = cand.generate(belief, max(self.screen, self.initialisations), init_rng, problem.opening,
-                               problem.jaw_width, problem.sigma_g, math.radians(self.angular_noise_deg))
+        grasps = cand.generate(belief, max(self.screen, self.initialisations), init_rng, problem.settings,
+                               math.radians(self.angular_noise_deg))
         objective = SurrogateObjective(problem, self.nu, math.radians(self.temperature_deg))
-        c = find_contacts(objective.mean, grasps[:, 0], grasps[:, 1], problem.jaw_width) if len(grasps) else None
+        c = (find_contacts(objective.mean, grasps[:, 0], grasps[:, 1], problem.settings.jaw_width)
+             if len(grasps) else None)
         if c is None or not np.any(c.status == OK):
             return Plan.without_grasp("no_candidate", "no initial grasp meets the mean shape", seconds=clock.phases)
         ok = c.status == OK
@@ -97,8 +98,7 @@ class GPGPISOpt(Planner):
             finalists = order[: self.finalists]
             shapes, approach, friction = rerank_rng.spawn(3)
             draws = draw_evaluation(belief, self.rerank_samples, shapes, approach, friction)
-            est = estimate_p_f(jaws[finalists], draws, problem.sigma_g, problem.friction, problem.opening,
-                               problem.jaw_width, problem.friction_spread)
+            est = estimate_p_f(jaws[finalists], draws, problem.settings)
             pick = int(np.argmax([e.p_f for e in est]))
             chosen, estimate = finalists[pick], est[pick].p_f
             message = f"finalists re-ranked on {self.rerank_samples} draws"
@@ -151,11 +151,12 @@ class SurrogateObjective:
         belief = problem.belief
         grid = belief.grid
         self.problem = problem
+        self.settings = settings = problem.settings
         self.h = grid.cell
         self.nu = nu
         self.temperature = temperature
-        self.cone = math.atan(problem.friction)
-        self.gap = cand.clearance(belief, problem.sigma_g)
+        self.cone = math.atan(settings.friction)
+        self.gap = cand.clearance(belief, settings.sigma_g)
         self.mean = belief.mean_field
         scale = belief.gp.scale_
         # Variance of the value and mean variance of the two gradient components, both as
@@ -178,7 +179,7 @@ class SurrogateObjective:
     def valid(self, jaws):
         half = 0.5 * self.problem.belief.grid.extent
         width = np.linalg.norm(jaws[:, 1] - jaws[:, 0], axis=1)
-        return (width <= self.problem.opening) & (np.abs(jaws) < half).all(axis=(1, 2)) & np.isfinite(width)
+        return (width <= self.settings.opening) & (np.abs(jaws) < half).all(axis=(1, 2)) & np.isfinite(width)
 
     def _evaluate(self, x):
         """Contacts of every sigma point: c1, c2, n1, n2 (R, 9, 2) and ok (R, 9)."""
@@ -186,10 +187,10 @@ class SurrogateObjective:
         g1, g2 = jaws[:, 0], jaws[:, 1]
         d = g2 - g1
         perp = np.stack([-d[:, 1], d[:, 0]], axis=1) / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
-        shift = self.problem.sigma_g * _K  # (9, 2): offsets of jaw 1 and jaw 2 across the axis
+        shift = self.settings.sigma_g * _K  # (9, 2): offsets of jaw 1 and jaw 2 across the axis
         s1 = (g1[:, None, :] + shift[None, :, 0, None] * perp[:, None, :]).reshape(-1, 2)
         s2 = (g2[:, None, :] + shift[None, :, 1, None] * perp[:, None, :]).reshape(-1, 2)
-        c = find_contacts(self.mean, s1, s2, self.problem.jaw_width, field_index=np.zeros(len(s1), dtype=np.int64))
+        c = find_contacts(self.mean, s1, s2, self.settings.jaw_width, field_index=np.zeros(len(s1), dtype=np.int64))
         r = len(x)
         return (c.c1.reshape(r, -1, 2), c.c2.reshape(r, -1, 2), c.n1.reshape(r, -1, 2), c.n2.reshape(r, -1, 2),
                 (c.status == OK).reshape(r, -1))
@@ -221,8 +222,8 @@ class SurrogateObjective:
             "pull": 1e-3 * (((reach - self.gap) / self.h) ** 2).sum(axis=1),
             # A nominal grasp that finds no contacts violates its cone constraints by a radian.
             "cone": np.where(hit[:, None], np.stack([a1[:, _NOMINAL], a2[:, _NOMINAL]], axis=1) - self.cone, 1.0),
-            "width": ((np.linalg.norm(jaws[:, 1] - jaws[:, 0], axis=1) - self.problem.opening) / self.h)[:, None],
-            "clear": (self.gap - self.problem.sigma_g - reach) / self.h,
+            "width": ((np.linalg.norm(jaws[:, 1] - jaws[:, 0], axis=1) - self.settings.opening) / self.h)[:, None],
+            "clear": (self.gap - self.settings.sigma_g - reach) / self.h,
         }
 
     def __call__(self, x):

@@ -36,7 +36,6 @@ class GPP(Planner):
     @staticmethod
     def _score(grasps, state):
         problem, draws = state
-        estimates = estimate_p_f(grasps, draws, problem.sigma_g, problem.friction, problem.opening,
-                                 problem.jaw_width, problem.friction_spread)
+        estimates = estimate_p_f(grasps, draws, problem.settings)
         # Ties in P_F (common near 0 and 1) go to the higher mean Ferrari-Canny quality.
         return np.array([e.p_f for e in estimates]), np.array([e.ferrari_canny_mean for e in estimates])

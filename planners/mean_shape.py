@@ -31,9 +31,9 @@ class MeanShape(Planner):
     def _score(grasps, state):
         problem, mean = state
         belief = problem.belief
-        c = find_contacts(mean, grasps[:, 0], grasps[:, 1], problem.jaw_width)
+        c = find_contacts(mean, grasps[:, 0], grasps[:, 1], problem.settings.jaw_width)
         quality = np.zeros(len(grasps))
         ok = c.status == OK
-        quality[ok] = ferrari_canny(c.c1[ok], c.c2[ok], c.n1[ok], c.n2[ok], problem.friction,
+        quality[ok] = ferrari_canny(c.c1[ok], c.c2[ok], c.n1[ok], c.n2[ok], problem.settings.friction,
                                     belief.center_of_mass, belief.characteristic_length)
         return quality, np.zeros(len(grasps))

@@ -24,8 +24,7 @@ def search(problem: Problem, rng: np.random.Generator, count: int, angular_noise
     belief = problem.belief
     if belief.mean_shape.is_empty:
         return Plan.without_grasp("no_surface", "the posterior mean has no inside", seconds=clock.phases)
-    grasps = cand.generate(belief, count, rng, problem.opening, problem.jaw_width, problem.sigma_g,
-                           np.radians(angular_noise_deg))
+    grasps = cand.generate(belief, count, rng, problem.settings, np.radians(angular_noise_deg))
     clock.lap("candidates")
     if len(grasps) == 0:
         return Plan.without_grasp("no_candidate", "no candidate grasp fits the gripper", seconds=clock.phases)

@@ -24,8 +24,8 @@ def _config(**changes) -> dict:
     config = {"name": "synthetic", "source": "synthetic.toml", "seed": 0, "realisations": 2,
               "scenes": [f"/nowhere/{s}.toml" for s in SCENES],
               "planners": [{"label": p, "name": p, "params": {}} for p in PLANNERS],
-              "analytic_draws": 100, "posterior_trials": POSTERIOR, "truth_trials": TRUTH, "sigma_g": None,
-              "friction": None, "friction_spread": 0.0, "time_budget_s": 10.0, "gripper": {}, "physics": {},
+              "analytic_draws": 100, "posterior_trials": POSTERIOR, "truth_trials": TRUTH,
+              "time_budget_s": 10.0, "settings": {}, "physics": {},
               "batch_size": 16}
     return {**config, **changes}
 

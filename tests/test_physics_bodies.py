@@ -14,6 +14,7 @@ from harness.belief import build_belief
 from harness.geometry import inside_region, largest_region
 from harness.physics.bodies import convex_pieces, create_body, field_polygon, prism_mass_properties
 from harness.physics.simulate import make_trials, truth_polygon
+from harness.settings import resolve
 from harness.physics.trial import Runner
 from harness.scene import load_scene
 from harness.seeding import stream
@@ -97,7 +98,7 @@ def test_an_empty_sample_gives_an_empty_polygon_and_the_outcome_empty_shape():
     scene = load_scene("rectangle")
     empty = field_polygon(np.full((scene.grid.size, scene.grid.size), 0.01), scene.grid)
     assert empty.is_empty
-    trial = make_trials(scene, [[-0.045, 0], [0.045, 0]], [empty], np.zeros((1, 2, 2)), 0.0, 0.5)
+    trial = make_trials(resolve(scene), [[-0.045, 0], [0.045, 0]], [empty], np.zeros((1, 2, 2)))
     assert Runner().run(trial)[0].outcome == "empty_shape"
 
 

@@ -13,12 +13,13 @@ import pytest
 from harness.physics.simulate import make_trials, truth_polygon
 from harness.physics.trial import Protocol, Runner, Trial, approach_blocked, free_travel
 from harness.scene import load_scene
+from harness.settings import resolve
 
 
 def _rectangle_trial(g1, g2, scene=None) -> Trial:
     scene = scene or load_scene("rectangle")
-    return make_trials(scene, [g1, g2], [truth_polygon(scene)], np.zeros((1, 2, 2)), 0.0,
-                       scene.physics.friction)[0]
+    settings = resolve(scene, {"sigma_g": 0.0})
+    return make_trials(settings, [g1, g2], [truth_polygon(scene)], np.zeros((1, 2, 2)))[0]
 
 
 def test_approach_collision_matches_the_rectangle_closed_form():
@@ -116,8 +117,7 @@ def test_the_same_seed_gives_the_same_trials_and_outcomes():
         belief = build_belief(scene, stream(3, "marker", 0, "sensor"))
         shapes_rng, approach_rng, _ = default_streams(3, "marker")
         polygons = sample_polygons(belief, 5, shapes_rng)
-        trials = make_trials(scene, grasp, polygons, approach_rng.standard_normal((5, 2, 2)),
-                             scene.gripper.sigma_g, scene.physics.friction)
+        trials = make_trials(resolve(scene), grasp, polygons, approach_rng.standard_normal((5, 2, 2)))
         with Runner(batch_size=3) as runner:  # two batches: a world reset in between
             return trials, [repr(r.as_dict()) for r in runner.run(trials)]
 

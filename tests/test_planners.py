@@ -18,6 +18,7 @@ from harness.grasp import Grasp
 from harness.quality import default_streams, draw_evaluation, estimate_p_f
 from harness.scene import library_names, load_scene
 from harness.seeding import stream
+from harness.settings import resolve
 from harness.testing import check_planner
 from planners.base import Plan, Planner, Problem
 from planners.gp_gpis_opt import GPGPISOpt
@@ -88,16 +89,16 @@ def test_every_built_in_planner_returns_a_valid_grasp_on_every_library_scene(bel
     for planner in (MeanShape(), GPP(), GPGPISOpt()):
         plan = planner.plan(problem, stream(0, name, planner.name))
         assert plan.status == "ok", (planner.name, plan.status, plan.message)
-        assert plan.grasp.problem(belief.grid, problem.opening) is None
+        assert plan.grasp.problem(belief.grid, problem.settings.opening) is None
 
 
 def test_gp_gpis_opt_finds_a_secure_grasp_on_the_rectangle(beliefs):
     belief = beliefs("rectangle")
-    problem = Problem.for_belief(belief, sigma_g=0.001, friction=0.5)
+    problem = Problem.for_belief(belief, resolve(belief.scene, {"sigma_g": 0.001, "friction": 0.5}))
     draws = draw_evaluation(belief, 1000, *default_streams(0, "rectangle"))
     for seed in range(3):
         plan = GPGPISOpt().plan(problem, stream(seed, "rectangle", "gp-gpis-opt"))
-        est = estimate_p_f(plan.grasp, draws, 0.001, 0.5, problem.opening, problem.jaw_width)[0]
+        est = estimate_p_f(plan.grasp, draws, problem.settings)[0]
         assert est.p_f >= 0.95, (seed, est)
 
 

@@ -15,8 +15,15 @@ from harness.quality import (FAILURE_REASONS, within_opening, default_streams, d
                              evaluate_draws, wilson_interval)
 from harness.scene import load_scene
 from harness.seeding import stream
+from harness.settings import resolve
 
 FRICTION, OPENING, JAW = 0.5, 0.10, 0.01
+
+
+def settings(sigma_g: float, friction_spread: float = 0.0):
+    """The calibration rectangle's settings (opening OPENING, jaw width JAW) with this noise."""
+    return resolve(load_scene("rectangle"), {"sigma_g": sigma_g, "friction": FRICTION,
+                                             "friction_spread": friction_spread})
 
 
 @pytest.fixture(scope="module")
@@ -36,7 +43,7 @@ def test_p_f_without_approach_noise_is_the_deterministic_answer(rectangle):
     friction cone (atan 0.5 = 26.6 degrees); 40 degrees: it meets the long sides 50
     degrees off their normal, outside it."""
     _, draws = rectangle
-    at10, at40 = estimate_p_f([through_centre(10), through_centre(40)], draws, 0.0, FRICTION, OPENING, JAW)
+    at10, at40 = estimate_p_f([through_centre(10), through_centre(40)], draws, settings(0.0))
     assert at10.p_f == 1.0 and at10.failures == dict.fromkeys(FAILURE_REASONS, 0)
     assert at40.p_f == 0.0 and at40.failures["friction_cone"] == 1000
     assert at10.ferrari_canny_mean > 0 and at40.ferrari_canny_mean == 0
@@ -48,7 +55,7 @@ def test_p_f_falls_as_approach_noise_grows_near_a_corner(rectangle):
     draws slide the plates onto the corner's rounded normals."""
     _, draws = rectangle
     grasp = Grasp((-0.045, 0.012), (0.045, 0.012))
-    p = [estimate_p_f(grasp, draws, s, FRICTION, OPENING, JAW)[0].p_f for s in (0.0, 0.002, 0.004, 0.008)]
+    p = [estimate_p_f(grasp, draws, settings(s))[0].p_f for s in (0.0, 0.002, 0.004, 0.008)]
     # The same draws at every sigma (common random numbers), so the decrease is not noise.
     assert all(a >= b for a, b in zip(p, p[1:])), p
     assert p[0] == 1.0 and p[-1] < 0.8
@@ -57,9 +64,9 @@ def test_p_f_falls_as_approach_noise_grows_near_a_corner(rectangle):
 def test_grasps_judged_together_share_every_draw(rectangle):
     _, draws = rectangle
     grasps = [through_centre(10), Grasp((-0.045, 0.012), (0.045, 0.012))]
-    together = evaluate_draws(grasps, draws, 0.004, FRICTION, OPENING, JAW)
+    together = evaluate_draws(grasps, draws, settings(0.004))
     for g, grasp in enumerate(grasps):
-        alone = evaluate_draws(grasp, draws, 0.004, FRICTION, OPENING, JAW)
+        alone = evaluate_draws(grasp, draws, settings(0.004))
         np.testing.assert_array_equal(together.closure[g], alone.closure[0])
         np.testing.assert_array_equal(together.reason[g], alone.reason[0])
 
@@ -68,7 +75,7 @@ def test_every_draw_is_a_success_or_exactly_one_failure(rectangle):
     _, draws = rectangle
     grasps = [through_centre(25), Grasp((0.0, 0.0), (0.045, 0.0)), Grasp((-0.045, 0.05), (0.045, 0.05)),
               Grasp((-0.045, 0.012), (0.045, 0.012))]
-    estimates = estimate_p_f(grasps, draws, 0.004, FRICTION, OPENING, JAW)
+    estimates = estimate_p_f(grasps, draws, settings(0.004))
     for est in estimates:
         assert est.p_f * est.samples + sum(est.failures.values()) == pytest.approx(est.samples)
     assert estimates[1].failures["too_wide"] == 1000  # g1 starts inside the rectangle
@@ -85,7 +92,7 @@ def test_friction_spread_draws_the_coefficient_around_its_mean(rectangle):
     friction above tan 36 deg = 0.73 hold (about 12 %)."""
     _, draws = rectangle
     grasp = through_centre(70)
-    closure = evaluate_draws(grasp, draws, 0.0, FRICTION, OPENING, JAW, friction_spread=0.2).closure[0]
+    closure = evaluate_draws(grasp, draws, settings(0.0, friction_spread=0.2)).closure[0]
     n = len(draws)
     contacts = find_contacts(draws.shapes, np.tile(grasp.array[0], (n, 1)), np.tile(grasp.array[1], (n, 1)), JAW)
     line = contacts.c2 - contacts.c1
@@ -145,7 +152,7 @@ def test_p_f_intervals_cover_the_pooled_value_at_their_nominal_rate():
     outcomes = []
     for block in range(5):
         draws = draw_evaluation(belief, 2000, *default_streams(1, "rectangle", block))
-        outcomes.append(evaluate_draws(grasp, draws, 0.004, FRICTION, OPENING, JAW).closure[0])
+        outcomes.append(evaluate_draws(grasp, draws, settings(0.004)).closure[0])
     outcomes = np.concatenate(outcomes)
     pooled = outcomes.mean()
     assert 0.2 < pooled < 0.9

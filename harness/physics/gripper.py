@@ -16,7 +16,7 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
-from harness.scene import Scene
+from harness.settings import GraspSettings
 
 #: Thickness of each jaw plate along the closing axis (m).
 PLATE_THICKNESS = 0.005
@@ -42,9 +42,9 @@ class GripperSpec:
     object_thickness: float
 
     @classmethod
-    def from_scene(cls, scene: Scene) -> "GripperSpec":
-        g = scene.gripper
-        return cls(g.opening, g.jaw_width, g.plate_height, g.force, g.closing_speed, scene.physics.thickness)
+    def from_settings(cls, settings: GraspSettings) -> "GripperSpec":
+        s = settings
+        return cls(s.opening, s.jaw_width, s.plate_height, s.force, s.closing_speed, s.thickness)
 
     @property
     def top(self) -> float:

@@ -23,6 +23,7 @@ from harness.physics.gripper import GripperAdapter, GripperSpec
 from harness.physics.trial import OUTCOMES, Trial
 from harness.quality import as_starts, executed_starts, wilson_interval
 from harness.scene import Scene
+from harness.settings import GraspSettings
 
 SHAPE_SOURCES = ("truth", "posterior")
 
@@ -40,27 +41,27 @@ def sample_polygons(belief: Belief, n: int, rng: np.random.Generator) -> list[Po
     return [field_polygon(f, belief.grid) for f in fields]
 
 
-def make_trials(scene: Scene, grasp, polygons: list[Polygon], approach: np.ndarray, sigma_g: float,
-                friction, gripper: GripperAdapter | None = None) -> list[Trial]:
-    """Trial i: ``polygons[i]`` (or the one polygon for all) with grasp executed under
-    ``approach[i]`` (standard-normal deviates (n, 2, 2) for g1 and g2) and jaw-object
-    friction ``friction`` (one value, or one per trial)."""
+def make_trials(settings: GraspSettings, grasp, polygons: list[Polygon], approach: np.ndarray,
+                friction_deviates: np.ndarray | None = None, gripper: GripperAdapter | None = None) -> list[Trial]:
+    """Trial i: ``polygons[i]`` (or the one polygon for all) extruded with the settings'
+    thickness and density, the grasp executed under ``approach[i]`` (standard-normal
+    deviates (n, 2, 2) for g1 and g2), jaw-object friction from ``friction_deviates[i]``
+    (the settings' friction when None), the settings' gripper unless ``gripper`` is given."""
     planned = as_starts(grasp)[0]
     n = len(approach)
-    frictions = np.broadcast_to(np.asarray(friction, dtype=float), (n,))
+    frictions = np.broadcast_to(settings.frictions(0.0 if friction_deviates is None else friction_deviates), (n,))
     if len(polygons) not in (1, n):
         raise ValueError("one polygon, or one per approach draw")
-    g1, g2 = executed_starts(planned, approach, sigma_g, scene.gripper.opening)
+    g1, g2 = executed_starts(planned, approach, settings)
     nominal = (planned[1] - planned[0]) / np.linalg.norm(planned[1] - planned[0])
-    gripper = gripper or GripperSpec.from_scene(scene).adapter()
-    phys = scene.physics
+    gripper = gripper or GripperSpec.from_settings(settings).adapter()
     trials = []
     for i in range(n):
         d = g2[i] - g1[i]
         length = float(np.hypot(*d))
         axis = d / length if length > 1e-9 else nominal
         trials.append(Trial(polygons[i if len(polygons) > 1 else 0], tuple(g1[i]), tuple(g2[i]), tuple(axis),
-                            phys.thickness, phys.density, float(frictions[i]), gripper))
+                            settings.thickness, settings.density, float(frictions[i]), gripper))
     return trials
 
 

@@ -19,6 +19,7 @@ from harness.belief import build_belief
 from harness.physics.simulate import make_trials, truth_polygon
 from harness.physics.trial import Protocol, Runner, Trial, TrialResult
 from harness.scene import library_names, load_scene
+from harness.settings import resolve
 from harness.seeding import stream
 
 
@@ -58,13 +59,13 @@ def library_trials(grasps_per_scene: int = 12, seed: int = 0, ranked: bool = Tru
     for name in library_names():
         scene = load_scene(name)
         belief = build_belief(scene, stream(seed, name, 0, "sensor"))
-        g, friction = scene.gripper, scene.physics.friction
+        settings = resolve(scene)
         count = RANKED_CANDIDATES if ranked else grasps_per_scene
-        grasps = generate(belief, count, stream(seed, name, 0, "study", "grasps"), g.opening, g.jaw_width, g.sigma_g)
+        grasps = generate(belief, count, stream(seed, name, 0, "study", "grasps"), settings)
         if ranked:
             draws = draw_evaluation(belief, RANKED_DRAWS, *(stream(seed, name, 0, "study", k)
                                                             for k in ("rank-shapes", "rank-approach", "rank-friction")))
-            p_f = [e.p_f for e in estimate_p_f(grasps, draws, g.sigma_g, friction, g.opening, g.jaw_width)]
+            p_f = [e.p_f for e in estimate_p_f(grasps, draws, settings)]
             grasps = grasps[np.argsort(p_f, kind="stable")[::-1][:grasps_per_scene]]
         n = len(grasps)
         samples = belief.sample(n, stream(seed, name, 0, "study", "shapes"))
@@ -76,11 +77,11 @@ def library_trials(grasps_per_scene: int = 12, seed: int = 0, ranked: bool = Tru
             for on_truth, polygon, field in ((True, truth, 0),
                                              (False, field_polygon(samples.values[k], scene.grid), k + 1)):
                 deviates = approach[k, 0 if on_truth else 1][None]
-                out.trials.extend(make_trials(scene, grasp, [polygon], deviates, g.sigma_g, friction))
-                g1, g2 = executed_starts(grasp, deviates, g.sigma_g, g.opening)
-                contacts = find_contacts(fields, g1, g2, g.jaw_width, field_index=np.array([field]))
+                out.trials.extend(make_trials(settings, grasp, [polygon], deviates))
+                g1, g2 = executed_starts(grasp, deviates, settings)
+                contacts = find_contacts(fields, g1, g2, settings.jaw_width, field_index=np.array([field]))
                 closure = bool(contacts.status[0] == OK and force_closure(
-                    contacts.c1, contacts.c2, contacts.n1, contacts.n2, friction)[0])
+                    contacts.c1, contacts.c2, contacts.n1, contacts.n2, settings.friction)[0])
                 out.scenes.append(name)
                 out.on_truth.append(on_truth)
                 out.force_closure.append(closure)
