@@ -147,17 +147,19 @@ def _p_f_row(scene_name: str, size: int) -> dict:
     belief = build_belief(scene, stream(0, "bench", size, "sensor"))
     t0 = time.perf_counter()
     draws = draw_evaluation(belief, SAMPLES, *default_streams(0, "bench", size))
-    draws.shapes.twist, draws.shapes.center_of_mass  # noqa: B018  (set-up counted here)
+    draws.shapes.twist, draws.shapes.regions  # noqa: B018  (set-up counted here)
     draws_s = time.perf_counter() - t0
     grasp = Grasp.from_centre((0.0, 0.0), 0.3, 0.09)
-    args = (grasp, draws, resolve(scene))
-    estimate = estimate_p_f(*args)[0]
-    best = math.inf
+    settings = resolve(scene)
+    estimate = estimate_p_f(grasp, draws, settings)[0]
+    best = {False: math.inf, True: math.inf}
     for _ in range(PF_REPEATS):
-        t0 = time.perf_counter()
-        estimate_p_f(*args)
-        best = min(best, time.perf_counter() - t0)
-    return {"M": size, "p_f_s": best, "draws_s": draws_s, "p_f": estimate.p_f, "peak_mb": _peak_mb()}
+        for lift in (False, True):  # interleaved, so both meet the same load on the machine
+            t0 = time.perf_counter()
+            estimate_p_f(grasp, draws, settings, lift=lift)
+            best[lift] = min(best[lift], time.perf_counter() - t0)
+    return {"M": size, "p_f_s": best[False], "p_l_s": best[True], "p_l_over_p_f": best[True] / best[False],
+            "draws_s": draws_s, "p_f": estimate.p_f, "p_l": estimate.p_l, "peak_mb": _peak_mb()}
 
 
 def _planner_row(scene_name: str, size: int) -> dict:
@@ -201,10 +203,11 @@ def planning(sizes=PLANNING_SIZES, scene: str = SAMPLING_SCENE) -> dict:
         return float(np.polyfit(np.log(ms), np.log(values), 1)[0]) if len(rows) > 1 else None
 
     at50 = next((r["p_f_s"] for r in rows if r["M"] == 50), None)
+    ratio50 = next((r["p_l_over_p_f"] for r in rows if r["M"] == 50), None)
     scp = {str(r["M"]): r["gp-gpis-opt"] for r in planners}
     gpp = {str(r["M"]): r["gp-p"] for r in planners}
     return {"scene": scene, "draws": SAMPLES, "grasp": "through the centre at 0.3 rad, width 0.09 m",
-            "rows": rows, "p_f_s_at_50": at50, "p_f_growth_exponent": growth([r["p_f_s"] for r in rows]),
+            "rows": rows, "p_f_s_at_50": at50, "p_l_over_p_f_at_50": ratio50, "p_f_growth_exponent": growth([r["p_f_s"] for r in rows]),
             "planner_scene": PLANNER_SCENE, "scp_s_per_init": scp, "gpp_s_per_candidate": gpp,
             "scp_over_gpp": {m: scp[m] / gpp[m] for m in scp},
             "scp_growth_exponent": growth(list(scp.values())), **_convergence_summary(convergence)}
@@ -349,6 +352,15 @@ def physics(grasps_per_scene: int = PHYSICS_GRASPS_PER_SCENE, seed: int = 0) -> 
     }
 
 
+def lift(trials: int = 16, seed: int = 0) -> dict:
+    """The lift model against the physics: the bar sweeps (where P_L and simulated success
+    fall through 0.5) and the friction levers of Bullet's contact manifolds on the
+    library trial set (harness.physics.lift_study)."""
+    from harness.physics.lift_study import manifold_levers, validate
+
+    return {**validate(trials=trials, seed=seed), "manifold_levers": manifold_levers(seed=seed)}
+
+
 def run(which: str = "all", exact_max_mb: float = 2500.0, sizes=None) -> dict:
     """Run the named benchmark(s); returns a JSON-ready dict."""
     results = {}
@@ -360,6 +372,8 @@ def run(which: str = "all", exact_max_mb: float = 2500.0, sizes=None) -> dict:
         results["quality"] = quality()
     if which in ("physics", "all"):
         results["physics"] = physics()
+    if which in ("lift", "all"):
+        results["lift"] = lift()
     return results[which] if which != "all" else results
 
 
@@ -367,12 +381,16 @@ def format_results(results: dict) -> str:
     """A human-readable table of benchmark results."""
     if "speedup" in results:
         results = {"physics": results}
+    elif "manifold_levers" in results:
+        results = {"lift": results}
     elif "rows" in results:
         kind = ("sampling" if "active_set_effect" in results else "quality" if "heavy_scenes" in results
                 else "planning")
         results = {kind: results}
     lines = []
     for name, res in results.items():
+        if name == "lift":
+            lines += _lift_lines(res)
         if name == "physics":
             lines.append(f"physics: {res['trials']} trials from the library scenes, step {res['time_step']:.6g} s, "
                          f"{res['solver_iterations']} solver iterations")
@@ -392,14 +410,16 @@ def format_results(results: dict) -> str:
                 lines.append(f"{'heavy mean':<15}" + "".join(f"{res['heavy_mean_p_f'][p]:>13.3f}"
                                                              for p in QUALITY_PLANNERS))
         if name == "planning":
-            lines.append(f"planning: one P_F estimate with {res['draws']} paired draws, scene '{res['scene']}', "
-                         f"grasp {res['grasp']}")
-            lines.append(f"{'M':>5} {'P_F ms':>8} {'draws s':>8} {'P_F':>6} {'peak MB':>8}")
+            lines.append(f"planning: one P_F estimate and one P_L estimate (P_F and the lift) with {res['draws']} "
+                         f"paired draws, scene '{res['scene']}', grasp {res['grasp']}")
+            lines.append(f"{'M':>5} {'P_F ms':>8} {'P_L ms':>8} {'ratio':>6} {'draws s':>8} {'P_F':>6} {'P_L':>6} "
+                         f"{'peak MB':>8}")
             for r in res["rows"]:
-                lines.append(f"{r['M']:>5} {r['p_f_s'] * 1e3:>8.2f} {r['draws_s']:>8.2f} {r['p_f']:>6.3f} "
-                             f"{r['peak_mb']:>8.0f}")
+                lines.append(f"{r['M']:>5} {r['p_f_s'] * 1e3:>8.2f} {r['p_l_s'] * 1e3:>8.2f} {r['p_l_over_p_f']:>6.2f} "
+                             f"{r['draws_s']:>8.2f} {r['p_f']:>6.3f} {r['p_l']:>6.3f} {r['peak_mb']:>8.0f}")
             if res["p_f_s_at_50"] is not None:
-                lines.append(f"P_F estimate at M = 50: {res['p_f_s_at_50'] * 1e3:.2f} ms (the original: 1.1 to 2.5 s)")
+                lines.append(f"P_F estimate at M = 50: {res['p_f_s_at_50'] * 1e3:.2f} ms (the original: 1.1 to 2.5 s); "
+                             f"P_L / P_F {res['p_l_over_p_f_at_50']:.2f}")
             if res["p_f_growth_exponent"] is not None:
                 lines.append(f"P_F growth exponent (log time vs log M): {res['p_f_growth_exponent']:.2f}")
             lines.append(f"{'M':>5} {'SCP ms/init':>12} {'GP-P ms/cand':>13} {'ratio':>6}")
@@ -432,3 +452,35 @@ def format_results(results: dict) -> str:
                 f"{a['mean_change_max_mm']:.3f}), std ratio {a['std_ratio_median']:.3f} (max {a['std_ratio_max']:.3f}); "
                 f"the full fit's own error vs truth: {a['full_error_vs_truth_p90_mm']:.3f} mm (90th pct)")
     return "\n".join(lines)
+
+
+def _lift_lines(res: dict) -> list[str]:
+    def at(v):
+        return "never" if v is None else f"{v * 1e3:.1f}"
+
+    def err(v):
+        return "-" if v is None else f"{v:+.0%}"
+
+    lines = [f"lift: bars gripped across their width, offsets from the centre of mass every "
+             f"{res['rows'][0]['points'][1]['offset'] * 1e3:.0f} mm, {res['trials_per_offset']} trials and "
+             f"{res['analytic_draws']} analytic draws per offset, sigma_g {res['sigma_g'] * 1e3:g} mm; offsets (mm) "
+             f"where P_L and success fall through 0.5, and where half the draws turn in the model and in the "
+             f"simulation; 'held at': the median angle of the turned trials that ended held",
+             f"{'bar':<44} {'P_L':>6} {'success':>8} {'error':>6} {'turns':>6} {'turned':>7} {'error':>6}"
+             f"  {'held at':>7}  failures"]
+    for r in res["rows"]:
+        held = "-" if r["held_turn_median"] is None else f"{r['held_turn_median']:.2f} rad"
+        fails = ", ".join(f"{k} {v}" for k, v in sorted(r["failures"].items())) or "none"
+        lines.append(f"{r['bar']:<44} {at(r['p_l_at']):>6} {at(r['success_at']):>8} {err(r['error']):>6} "
+                     f"{at(r['model_turning_at']):>6} {at(r['turning_at']):>7} {err(r['turning_error']):>6}"
+                     f"  {held:>7}  {fails}")
+    largest = res["largest_error"]
+    lines.append(f"largest relative error: P_L vs success {err(largest)}, the model's turning vs the "
+                 f"simulation's {err(res['largest_turning_error'])}"
+                 + (f"; {res['missing']} rows without a crossing on one side" if res["missing"] else ""))
+    m = res["manifold_levers"]
+    q = m["quartiles"]
+    lines.append(f"Bullet's manifold levers on {m['plates']} plates of the library trial set, as fractions of the "
+                 f"largest admissible lever: quartiles {q[0]:.2f} / {q[1]:.2f} / {q[2]:.2f} (uniform: 0.25 / 0.50 / "
+                 f"0.75), {m['single_point']:.0%} held by one point, {m['beyond_largest']:.1%} beyond the largest")
+    return lines

@@ -146,9 +146,11 @@ def _quality(args) -> int:
         print(json.dumps(out))
     else:
         fails = ", ".join(f"{k} {v}" for k, v in est.failures.items())
-        print(f"{scene.name}: P_F = {est.p_f:.3f} (95% CI {est.ci_low:.3f} to {est.ci_high:.3f}) over "
+        print(f"{scene.name}: P_F = {est.p_f:.3f} (95% CI {est.ci_low:.3f} to {est.ci_high:.3f}), "
+              f"P_L = {est.p_l:.3f} (95% CI {est.p_l_ci_low:.3f} to {est.p_l_ci_high:.3f}) over "
               f"{est.samples} draws, sigma_g = {settings.sigma_g:g} m, friction = {settings.friction:g}")
-        print(f"failures: {fails}; mean Ferrari-Canny quality {est.ferrari_canny_mean:.4f}")
+        print(f"failures: {fails}; the weight turned the object in {est.pivots} draws; "
+              f"mean Ferrari-Canny quality {est.ferrari_canny_mean:.4f}")
     return 0
 
 
@@ -164,7 +166,7 @@ def _simulate(args) -> int:
     scene, grasp, settings = _scene_and_grasp(args)
     if args.frames is not None and Path(args.frames).exists() and not Path(args.frames).is_dir():
         raise InputError("--frames", None, f"{args.frames} exists and is not a folder")
-    shapes_rng, approach_rng, friction_rng = default_streams(args.seed, scene.name)
+    shapes_rng, approach_rng, friction_rng, _ = default_streams(args.seed, scene.name)
     if args.shapes == "posterior":
         belief = build_belief(scene, stream(args.seed, scene.name, 0, "sensor"))
         polygons = sample_polygons(belief, args.trials, shapes_rng)
@@ -290,7 +292,8 @@ def _plan(args) -> int:
     plan_time = time.perf_counter() - start
     out = {"planner": planner.name, "scene": scene.name, "seed": args.seed, "status": plan.status,
            "grasp": None, "estimate": plan.estimate, "plan_time_s": plan_time, "iterations": plan.iterations,
-           "evaluations": plan.evaluations, "p_f": None, "ci_low": None, "ci_high": None,
+           "evaluations": plan.evaluations, "p_f": None, "ci_low": None, "ci_high": None, "p_l": None,
+           "p_l_ci_low": None, "p_l_ci_high": None,
            "sigma_g": settings.sigma_g, "friction": settings.friction, "params": planner.get_params(),
            "message": plan.message}
     if plan.grasp is not None:
@@ -298,7 +301,8 @@ def _plan(args) -> int:
         draws = draw_evaluation(belief, 1000, *default_streams(args.seed, scene.name))
         est = estimate_p_f(plan.grasp, draws, settings)[0]
         out.update(grasp={"g1": list(plan.grasp.g1), "g2": list(plan.grasp.g2)}, p_f=est.p_f,
-                   ci_low=est.ci_low, ci_high=est.ci_high)
+                   ci_low=est.ci_low, ci_high=est.ci_high, p_l=est.p_l, p_l_ci_low=est.p_l_ci_low,
+                   p_l_ci_high=est.p_l_ci_high)
     if args.json:
         print(json.dumps(out))
     else:
@@ -307,7 +311,8 @@ def _plan(args) -> int:
         if plan.grasp is not None:
             g1, g2 = plan.grasp.g1, plan.grasp.g2
             print(f"grasp g1 = ({g1[0]:.4f}, {g1[1]:.4f}) m, g2 = ({g2[0]:.4f}, {g2[1]:.4f}) m; "
-                  f"P_F = {out['p_f']:.3f} (95% CI {out['ci_low']:.3f} to {out['ci_high']:.3f}); "
+                  f"P_F = {out['p_f']:.3f} (95% CI {out['ci_low']:.3f} to {out['ci_high']:.3f}), "
+                  f"P_L = {out['p_l']:.3f} (95% CI {out['p_l_ci_low']:.3f} to {out['p_l_ci_high']:.3f}); "
                   f"planner's estimate {plan.estimate if plan.estimate is None else round(plan.estimate, 3)}")
         if plan.message:
             print(plan.message)
@@ -361,7 +366,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=_seed, default=0, help="experiment seed (default 0)")
     p.set_defaults(func=_scenes_render)
 
-    p = sub.add_parser("quality", help="Monte-Carlo probability of force closure of one grasp")
+    p = sub.add_parser("quality", help="Monte-Carlo probabilities of force closure (P_F) and lift (P_L) of one grasp")
     p.add_argument("scene", help="library name or path to a scene file")
     p.add_argument("--grasp", **_GRASP)
     p.add_argument("--samples", type=_positive_int, default=1000, help="paired draws (default 1000)")
@@ -421,7 +426,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     bench = sub.add_parser("bench", help="benchmarks, measured as ratios in one run")
     bench.add_argument("which", nargs="?", default="all",
-                       choices=["sampling", "planning", "quality", "physics", "all"])
+                       choices=["sampling", "planning", "quality", "physics", "lift", "all"])
     bench.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     bench.add_argument("--exact-max-mb", type=float, default=2500.0,
                        help="skip the dense exact sampler when its covariance exceeds this (default 2500)")

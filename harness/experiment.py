@@ -305,11 +305,14 @@ def _cell(config: ExperimentConfig, path: str, realisation: int, labels: tuple[s
         plans.append(row)
         if row["executed"]:
             grasp = np.array([[row["g1x"], row["g1y"]], [row["g2x"], row["g2y"]]])
-            est = evaluate_draws(grasp, draws.first(config.analytic_draws), settings).estimates[0]
+            outcomes = evaluate_draws(grasp, draws.first(config.analytic_draws), settings)
+            est = outcomes.estimates[0]
             analytic.append({"scene": name, "realisation": realisation, "planner": entry.label,
                              "draws": est.samples, "p_f": est.p_f, "ci_low": est.ci_low, "ci_high": est.ci_high,
                              "ferrari_canny_mean": est.ferrari_canny_mean,
-                             "failures": json.dumps(est.failures, sort_keys=True)})
+                             "failures": json.dumps(est.failures, sort_keys=True), "p_l": est.p_l,
+                             "p_l_ci_low": est.p_l_ci_low, "p_l_ci_high": est.p_l_ci_high, "pivots": est.pivots,
+                             "reasons": draw_reasons(outcomes.reason[0, :config.posterior_trials])})
     k = config.posterior_trials
     polygons = [field_polygon(f, belief.grid) for f in draws.shapes.values[:k]]
     truth_approach = stream(config.seed, name, realisation, "truth-approach").standard_normal(
@@ -317,6 +320,14 @@ def _cell(config: ExperimentConfig, path: str, realisation: int, labels: tuple[s
     truth_friction = stream(config.seed, name, realisation, "truth-friction").standard_normal(config.truth_trials)
     return CellResult(name, realisation, plans, analytic, polygons, draws.approach[:k].copy(),
                       draws.friction[:k].copy(), truth_approach, truth_friction, time.perf_counter() - start)
+
+
+def draw_reasons(reason: np.ndarray) -> str:
+    """The analytic verdicts of the draws that posterior trials 0, 1, ... share, as text
+    for the ledger: one comma-separated name per draw ('lifted' or the failure reason)."""
+    from harness.quality import FAILURE_REASONS
+
+    return ",".join("lifted" if r < 0 else FAILURE_REASONS[r] for r in reason)
 
 
 class _Overtime(Exception):

@@ -30,6 +30,11 @@ TIE_CELLS = 0.1
 #: A contact's normal is degenerate when the SDF gradient there is shorter than this
 #: (an SDF's gradient has length 1).
 MIN_GRADIENT = 1e-3
+#: A plate touches the object where the surface lies within this distance (m) of the
+#: plate's face at the first contact: the contact patch's extent along the outline (see
+#: :class:`Contacts`). Below the plate lines' spacing (2.5 mm on a 10 mm plate) it only
+#: separates a flat face from a curved one.
+PATCH_DEPTH = 0.0005
 #: Work arrays of the march hold at most this many field evaluations at once.
 _MAX_EVALUATIONS = 2_000_000
 
@@ -128,13 +133,38 @@ class SDFBatch:
         return (0.5 * (np.gradient(self.gx, h, axis=1) + np.gradient(self.gy, h, axis=2))).astype(np.float32)
 
     @cached_property
-    def center_of_mass(self) -> np.ndarray:
-        """Centroid (F, 2) of each field's largest connected region inside the zero level.
+    def regions(self) -> "Regions":
+        """Each field's largest connected region inside the zero level: its area, centroid
+        and convex hull (see :class:`Regions`)."""
+        return _largest_regions(self.values.astype(float), self.grid)
 
-        Cells count with the fraction of their area inside, clip(1/2 - f / h, 0, 1) (exact
-        for a boundary parallel to a cell side), and connect through their sides; NaN
-        for a field with no inside at all."""
-        return _centers_of_mass(self.values.astype(float), self.grid)
+    @property
+    def center_of_mass(self) -> np.ndarray:
+        """Centroid (F, 2) of each field's largest connected region inside the zero level
+        (NaN for a field with no inside at all)."""
+        return self.regions.center_of_mass
+
+
+@dataclass(frozen=True)
+class Regions:
+    """The largest connected region inside the zero level of each of F fields, the body a
+    physics trial extrudes. Cells count with the fraction of their area inside,
+    clip(1/2 - f / h, 0, 1) (exact for a boundary parallel to a cell side), and connect
+    through their sides. area (F,) in m^2 (0 without an inside); center_of_mass (F, 2)
+    (NaN without an inside); hull (F, V, 2): the convex hull of the centres of the
+    region's cells, padded by repeating a vertex, so that the region's extent in any
+    direction is a maximum over V points (to within half a cell)."""
+
+    area: np.ndarray
+    center_of_mass: np.ndarray
+    hull: np.ndarray
+
+    def extent(self, field_index: np.ndarray, origin: np.ndarray, direction: np.ndarray) -> np.ndarray:
+        """How far (B,) region ``field_index[b]`` reaches from ``origin[b]`` along the unit
+        vector ``direction[b]`` (-inf without an inside)."""
+        points = self.hull[field_index]  # (B, V, 2)
+        reach = np.einsum("bvk,bk->bv", points - origin[:, None, :], direction)
+        return reach.max(axis=1)
 
 
 @dataclass(frozen=True)
@@ -142,13 +172,18 @@ class Contacts:
     """Where each jaw first meets the zero level: points c1, c2 (B, 2), outward unit
     normals n1, n2 (B, 2) (NaN where there is no contact) and a status (B,) per grasp:
     OK, MISSED (no object between the jaws), TOO_WIDE (a jaw starts inside the
-    object) or DEGENERATE (a vanishing gradient at a contact)."""
+    object) or DEGENERATE (a vanishing gradient at a contact). w1, w2 (B,): each plate's
+    contact patch along the outline, the spread across the plate of the lines that meet
+    the surface within PATCH_DEPTH of the first contact (0 for a point or curved contact,
+    up to the plate's width for a flat face; NaN where there is no contact)."""
 
     c1: np.ndarray
     c2: np.ndarray
     n1: np.ndarray
     n2: np.ndarray
     status: np.ndarray
+    w1: np.ndarray
+    w2: np.ndarray
 
 
 def find_contacts(fields: SDFBatch, g1, g2, jaw_width: float, field_index=None,
@@ -169,14 +204,15 @@ def find_contacts(fields: SDFBatch, g1, g2, jaw_width: float, field_index=None,
     if field_index is None:
         field_index = np.arange(b) if len(fields) == b else np.zeros(b, dtype=np.int64)
     field_index = np.broadcast_to(np.asarray(field_index, dtype=np.int64), (b,))
-    out = Contacts(*(np.full((b, 2), np.nan) for _ in range(4)), np.empty(b, dtype=np.int8))
+    out = Contacts(*(np.full((b, 2), np.nan) for _ in range(4)), np.empty(b, dtype=np.int8),
+                   np.full(b, np.nan), np.full(b, np.nan))
     steps = max(2, int(math.ceil(np.max(np.linalg.norm(g2 - g1, axis=1), initial=0.0)
                                  / (MARCH_STEP_CELLS * fields.grid.cell))) + 1)
     chunk = max(1, _MAX_EVALUATIONS // (plate_lines * steps))
     for start in range(0, b, chunk):
         s = slice(start, min(b, start + chunk))
         part = _contacts_chunk(fields, g1[s], g2[s], jaw_width, field_index[s], plate_lines, steps)
-        for name in ("c1", "c2", "n1", "n2", "status"):
+        for name in ("c1", "c2", "n1", "n2", "status", "w1", "w2"):
             getattr(out, name)[s] = getattr(part, name)
     return out
 
@@ -243,7 +279,16 @@ def _contacts_chunk(fields: SDFBatch, g1, g2, jaw_width, fidx, plate_lines, step
     bad = np.concatenate([status != OK] * 2)
     point[bad] = np.nan
     normal[bad] = np.nan
-    return Contacts(point[:b], point[b:], normal[:b], normal[b:], status)
+    # Patches, from the bracketed crossings (one bilinear estimate for every line alike).
+    depth = PATCH_DEPTH / safe[:, None]
+    spacing = jaw_width / max(plate_lines - 1, 1)
+    widths = []
+    for touch in (t1 <= t1[rows, best1][:, None] + depth, t2 >= t2[rows, best2][:, None] - depth):
+        line_index = np.arange(plate_lines)
+        first = np.where(touch, line_index, plate_lines).min(axis=1)
+        last = np.where(touch, line_index, -1).max(axis=1)
+        widths.append(np.where(status == OK, (last - first) * spacing, np.nan))
+    return Contacts(point[:b], point[b:], normal[:b], normal[b:], status, *widths)
 
 
 def _secant(f, ts, i_out, i_in):
@@ -425,15 +470,15 @@ def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
                             u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]])
 
 
-def _centers_of_mass(values: np.ndarray, grid: Grid) -> np.ndarray:
+def _largest_regions(values: np.ndarray, grid: Grid) -> Regions:
     f, h = len(values), grid.cell
     frac = np.clip(0.5 - values / h, 0.0, 1.0)
     structure = np.zeros((3, 3, 3), dtype=bool)
     structure[1] = [[0, 1, 0], [1, 1, 1], [0, 1, 0]]  # connect within a field only
     labels, count = ndimage.label(frac > 0, structure=structure)
-    out = np.full((f, 2), np.nan)
+    com = np.full((f, 2), np.nan)
     if count == 0:
-        return out
+        return Regions(np.zeros(f), com, np.full((f, 1, 2), -np.inf))
     area = ndimage.sum_labels(frac, labels, index=np.arange(1, count + 1))
     # Labels run in scan order, so each field's regions hold a contiguous run of labels
     # (first..last); a field without any region has last < first.
@@ -446,10 +491,37 @@ def _centers_of_mass(values: np.ndarray, grid: Grid) -> np.ndarray:
     candidates = np.where(area == largest, np.arange(1, count + 1), count + 1)
     best = np.zeros(f, dtype=np.int64)
     best[fields] = np.minimum.reduceat(candidates, starts)
-    w = np.where(labels == best[:, None, None], frac, 0.0)
+    mine = labels == best[:, None, None]
+    w = np.where(mine, frac, 0.0)
     total = w.sum(axis=(1, 2))
     with np.errstate(invalid="ignore", divide="ignore"):
-        out[:, 0] = w.sum(axis=1) @ grid.coords / total
-        out[:, 1] = w.sum(axis=2) @ grid.coords / total
-    out[total == 0] = np.nan
+        com[:, 0] = w.sum(axis=1) @ grid.coords / total
+        com[:, 1] = w.sum(axis=2) @ grid.coords / total
+    com[total == 0] = np.nan
+    return Regions(total * h * h, com, _hulls(mine, grid))
+
+
+def _hulls(mine: np.ndarray, grid: Grid) -> np.ndarray:
+    """Convex hull vertices (F, V, 2) of each mask's cell centres, padded with the first
+    vertex (-inf for an empty mask). Only a region's border cells can be hull vertices,
+    so the hull is built from those."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    border = mine & ~ndimage.binary_erosion(mine, structure=np.ones((1, 3, 3), dtype=bool))
+    hulls = []
+    for mask in border:
+        iy, ix = np.nonzero(mask)
+        points = np.column_stack([grid.coords[ix], grid.coords[iy]])
+        if len(points) >= 3:
+            try:
+                points = points[ConvexHull(points).vertices]
+            except QhullError:  # collinear cells: every one is an extreme point of the segment
+                pass
+        hulls.append(points)
+    size = max(1, max(len(p) for p in hulls))
+    out = np.full((len(hulls), size, 2), -np.inf)
+    for k, p in enumerate(hulls):
+        if len(p):
+            out[k, :len(p)] = p
+            out[k, len(p):] = p[0]
     return out

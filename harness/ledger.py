@@ -20,7 +20,14 @@ import pandas as pd
 
 from harness.errors import InputError
 
-FORMAT = "gpis-harness ledger 1"
+FORMAT = "gpis-harness ledger 2"
+#: Format 1 lacked the analytic P_L: a format-1 ledger gains its columns (empty for the
+#: rows it holds) when opened.
+_MIGRATIONS = {"gpis-harness ledger 1": ("ALTER TABLE analytic ADD COLUMN p_l REAL",
+                                         "ALTER TABLE analytic ADD COLUMN p_l_ci_low REAL",
+                                         "ALTER TABLE analytic ADD COLUMN p_l_ci_high REAL",
+                                         "ALTER TABLE analytic ADD COLUMN pivots INTEGER",
+                                         "ALTER TABLE analytic ADD COLUMN reasons TEXT")}
 FILENAME = "ledger.sqlite"
 
 _SCHEMA = """
@@ -40,6 +47,7 @@ CREATE TABLE IF NOT EXISTS analytic (
     config_hash TEXT NOT NULL, scene TEXT NOT NULL, realisation INTEGER NOT NULL,
     planner TEXT NOT NULL, draws INTEGER NOT NULL, p_f REAL NOT NULL, ci_low REAL NOT NULL,
     ci_high REAL NOT NULL, ferrari_canny_mean REAL NOT NULL, failures TEXT NOT NULL,
+    p_l REAL, p_l_ci_low REAL, p_l_ci_high REAL, pivots INTEGER, reasons TEXT,
     PRIMARY KEY (config_hash, scene, realisation, planner));
 CREATE TABLE IF NOT EXISTS trials (
     config_hash TEXT NOT NULL, scene TEXT NOT NULL, realisation INTEGER NOT NULL,
@@ -52,7 +60,7 @@ _COLUMNS = {
     "plans": ("scene", "realisation", "planner", "planner_name", "params", "status", "executed", "message",
               "g1x", "g1y", "g2x", "g2y", "estimate", "plan_time_s", "iterations", "evaluations", "trace"),
     "analytic": ("scene", "realisation", "planner", "draws", "p_f", "ci_low", "ci_high", "ferrari_canny_mean",
-                 "failures"),
+                 "failures", "p_l", "p_l_ci_low", "p_l_ci_high", "pivots", "reasons"),
     "trials": ("scene", "realisation", "planner", "shapes", "trial", "outcome", "steps", "grip_width",
                "closing_turn", "rise", "pivot"),
 }
@@ -83,6 +91,12 @@ class Ledger:
             if "meta" in tables:
                 row = self.db.execute("SELECT value FROM meta WHERE key = 'format'").fetchone()
                 found = row[0] if row else None
+            if found in _MIGRATIONS:
+                with self.transaction():
+                    for statement in _MIGRATIONS[found]:
+                        self.db.execute(statement)
+                    self.db.execute("UPDATE meta SET value = ? WHERE key = 'format'", (FORMAT,))
+                found = FORMAT
             if found != FORMAT:
                 raise InputError(str(self.path), None, "not a gpis-harness ledger (a foreign SQLite database)")
             check = self.db.execute("PRAGMA quick_check").fetchone()[0]

@@ -198,22 +198,27 @@ def failures_figure(fails):
 
 
 def calibration_figure(bins):
-    """Reliability diagram: plans binned by analytic P_F against their physical success."""
+    """Reliability diagram: plans binned by their analytic P_F and, separately, by their
+    P_L, against their physical success on posterior samples."""
     fig, ax = plt.subplots(figsize=(5.0, 5.0), constrained_layout=True)
     ax.plot([0, 1], [0, 1], color="0.6", ls="--", lw=1, label="perfect calibration")
-    if len(bins):
-        err = np.vstack([bins.success_rate - bins.ci_low, bins.ci_high - bins.success_rate])
-        ax.errorbar(bins.mean_p_f, bins.success_rate, yerr=err, fmt="o", color="tab:blue", capsize=3,
-                    label="plans binned by P_F (95% CI)")
-        for _, b in bins.iterrows():
-            ax.annotate(f"{int(b.plans)}", (b.mean_p_f, b.success_rate), textcoords="offset points",
-                        xytext=(5, -10), fontsize=7, color="0.3")
+    styles = {"p_f": ("o", "tab:blue", "P_F (force closure)", -10), "p_l": ("s", "tab:red", "P_L (and lifted)", 5)}
+    for metric, (marker, colour, name, dy) in styles.items():
+        b = bins[bins.metric == metric] if len(bins) else bins
+        if not len(b):
+            continue
+        err = np.vstack([b.success_rate - b.ci_low, b.ci_high - b.success_rate])
+        ax.errorbar(b.mean_estimate, b.success_rate, yerr=err, fmt=marker, color=colour, capsize=3,
+                    label=f"plans binned by {name} (95% CI)")
+        for _, row in b.iterrows():
+            ax.annotate(f"{int(row.plans)}", (row.mean_estimate, row.success_rate), textcoords="offset points",
+                        xytext=(5, dy), fontsize=7, color=colour)
     ax.set_xlim(0, 1.02)
     ax.set_ylim(0, 1.02)
     ax.set_aspect("equal")
-    ax.set_xlabel("analytic P_F of the plan")
+    ax.set_xlabel("analytic estimate of the plan")
     ax.set_ylabel("physical success on posterior samples")
-    ax.legend(fontsize=8, loc="lower right")
+    ax.legend(fontsize=8, loc="upper left")
     ax.set_title("Calibration (numbers: plans per bin)", fontsize=10)
     return fig
 

@@ -1,5 +1,6 @@
-"""Monte-Carlo probability of force closure (P_F) with paired draws over shape samples,
-approach noise and friction, its Wilson interval, and failure counts by reason."""
+"""Monte-Carlo probability of force closure (P_F) and of force closure and lift (P_L,
+harness.lift) with paired draws over shape samples, approach noise, friction and the
+plates' pressure, their Wilson intervals, and failure counts by reason."""
 
 from __future__ import annotations
 
@@ -11,10 +12,13 @@ import numpy as np
 from harness.belief import Belief
 from harness.grasp import (DEGENERATE, MISSED, OK, TOO_WIDE, Grasp, SDFBatch, ferrari_canny, find_contacts,
                            force_closure)
+from harness.lift import LIFT_REASONS, judge, side_normal
 from harness.settings import GraspSettings
 
-#: Failure reasons, in the order a draw is classified (the first that applies).
-FAILURE_REASONS = ("too_wide", "missed", "degenerate_normal", "friction_cone")
+#: Failure reasons, in the order a draw is classified (the first that applies): the
+#: planar ones (P_F), then the lift's for draws in force closure (P_L).
+PLANAR_REASONS = ("too_wide", "missed", "degenerate_normal", "friction_cone")
+FAILURE_REASONS = PLANAR_REASONS + LIFT_REASONS
 #: Two-sided 95 % normal quantile.
 Z95 = 1.959963984540054
 
@@ -38,13 +42,16 @@ def wilson_interval(successes, n, z: float = Z95) -> tuple[np.ndarray, np.ndarra
 @dataclass(frozen=True)
 class EvaluationDraws:
     """The common random numbers of one belief: n shape samples (as a field batch) and,
-    paired with them, standard-normal approach offsets (n, 2, 2) for g1 and g2 and
-    standard-normal friction deviates (n,). Every grasp compared on this belief is judged
-    on the same draws; sigma_g and the friction spread scale the deviates at use."""
+    paired with them, standard-normal approach offsets (n, 2, 2) for g1 and g2,
+    standard-normal friction deviates (n,) and uniform pressure deviates (n, 2) in [0, 1)
+    (where each plate's friction lever lies in its admissible range; harness.lift). Every
+    grasp compared on this belief is judged on the same draws; sigma_g and the friction
+    spread scale the deviates at use."""
 
     shapes: SDFBatch
     approach: np.ndarray
     friction: np.ndarray
+    pressure: np.ndarray
     torque_scale: float
 
     def __len__(self) -> int:
@@ -54,25 +61,29 @@ class EvaluationDraws:
         """The first n paired draws (all of them when there are fewer)."""
         if n >= len(self):
             return self
-        return EvaluationDraws(self.shapes.first(n), self.approach[:n], self.friction[:n], self.torque_scale)
+        return EvaluationDraws(self.shapes.first(n), self.approach[:n], self.friction[:n], self.pressure[:n],
+                               self.torque_scale)
 
 
-def draw_evaluation(belief: Belief, n: int, shapes_rng: np.random.Generator,
-                    approach_rng: np.random.Generator, friction_rng: np.random.Generator) -> EvaluationDraws:
+def draw_evaluation(belief: Belief, n: int, shapes_rng: np.random.Generator, approach_rng: np.random.Generator,
+                    friction_rng: np.random.Generator, pressure_rng: np.random.Generator) -> EvaluationDraws:
     """Draw n paired evaluation draws for a belief (shape samples once per belief)."""
     shapes = belief.sample(n, shapes_rng)
     return EvaluationDraws(
         shapes=SDFBatch(belief.grid, shapes.values, shapes.gradients),
         approach=approach_rng.standard_normal((n, 2, 2)),
         friction=friction_rng.standard_normal(n),
+        pressure=pressure_rng.random((n, 2)),
         torque_scale=belief.characteristic_length,
     )
 
 
 @dataclass(frozen=True)
 class QualityEstimate:
-    """P_F of one grasp: the estimate, its Wilson 95 % interval, the number of draws,
-    failures by reason and the mean Ferrari-Canny quality (0 for a failed draw)."""
+    """P_F and P_L of one grasp: the estimates and their Wilson 95 % intervals, the number
+    of draws, failures by reason (the planar reasons count draws P_F loses, all of them
+    the draws P_L loses), the draws whose weight turned the object about the grasp axis
+    (lifted or not), and the mean Ferrari-Canny quality (0 for a failed draw)."""
 
     p_f: float
     ci_low: float
@@ -80,34 +91,47 @@ class QualityEstimate:
     samples: int
     failures: dict
     ferrari_canny_mean: float
+    p_l: float
+    p_l_ci_low: float
+    p_l_ci_high: float
+    pivots: int
 
     def as_dict(self) -> dict:
-        return {"p_f": self.p_f, "ci_low": self.ci_low, "ci_high": self.ci_high, "samples": self.samples,
-                "failures": dict(self.failures), "ferrari_canny_mean": self.ferrari_canny_mean}
+        return {"p_f": self.p_f, "ci_low": self.ci_low, "ci_high": self.ci_high, "p_l": self.p_l,
+                "p_l_ci_low": self.p_l_ci_low, "p_l_ci_high": self.p_l_ci_high, "samples": self.samples,
+                "failures": dict(self.failures), "pivots": self.pivots, "ferrari_canny_mean": self.ferrari_canny_mean}
 
 
 @dataclass(frozen=True)
 class DrawOutcomes:
-    """Per-draw results (G, n) for G grasps: force closure, failure reason index into
-    FAILURE_REASONS (-1 for success) and Ferrari-Canny quality."""
+    """Per-draw results (G, n) for G grasps: force closure, lifted (force closure and the
+    lift; None when the lift was not judged), failure reason index into FAILURE_REASONS
+    (-1 for lifted, or for force closure without the lift), whether the weight turned
+    the object, and the Ferrari-Canny quality."""
 
     closure: np.ndarray
+    lifted: np.ndarray | None
     reason: np.ndarray
+    pivots: np.ndarray
     ferrari_canny: np.ndarray
 
     @cached_property
     def estimates(self) -> list[QualityEstimate]:
         n = self.closure.shape[1]
         k = self.closure.sum(axis=1)
+        kl = self.lifted.sum(axis=1) if self.lifted is not None else np.full(len(k), np.nan)
         lo, hi = wilson_interval(k, n)
+        llo, lhi = wilson_interval(kl, n)
         counts = np.stack([(self.reason == r).sum(axis=1) for r in range(len(FAILURE_REASONS))], axis=1)
         fc = self.ferrari_canny.mean(axis=1)
+        pivots = self.pivots.sum(axis=1)
         return [QualityEstimate(float(k[g] / n), float(lo[g]), float(hi[g]), n,
-                                {name: int(counts[g, r]) for r, name in enumerate(FAILURE_REASONS)}, float(fc[g]))
+                                {name: int(counts[g, r]) for r, name in enumerate(FAILURE_REASONS)}, float(fc[g]),
+                                float(kl[g] / n), float(llo[g]), float(lhi[g]), int(pivots[g]))
                 for g in range(len(k))]
 
 
-def evaluate_draws(grasps, draws: EvaluationDraws, settings: GraspSettings) -> DrawOutcomes:
+def evaluate_draws(grasps, draws: EvaluationDraws, settings: GraspSettings, lift: bool = True) -> DrawOutcomes:
     """Judge G grasps ((G, 2, 2) jaw starts, or Grasp objects) on every paired draw.
 
     Draw i perturbs g1 and g2 by sigma_g times its approach deviates, uses shape sample
@@ -115,8 +139,11 @@ def evaluate_draws(grasps, draws: EvaluationDraws, settings: GraspSettings) -> D
     than the gripper's opening is narrowed symmetrically to the opening (the gripper
     cannot open further). A draw fails, in this order, when a jaw starts inside the
     shape (too_wide), when no object lies between the jaws (missed), when a contact
-    normal is undefined (degenerate_normal), or when the grasp is not in force closure
-    (friction_cone).
+    normal is undefined (degenerate_normal), when the grasp is not in force closure
+    (friction_cone), and then, in force closure, when the weight slides the object out
+    (weight_slip) or turns it back onto the table (weight_torque) (harness.lift, with
+    the shape sample's area and centre of mass and draw i's pressure deviates).
+    ``lift=False`` skips the lift (P_F alone; P_L is then NaN).
     """
     starts = as_starts(grasps)
     g, n = len(starts), len(draws)
@@ -137,12 +164,24 @@ def evaluate_draws(grasps, draws: EvaluationDraws, settings: GraspSettings) -> D
     reason[~ok & (contacts.status == MISSED)] = FAILURE_REASONS.index("missed")
     reason[~ok & (contacts.status == DEGENERATE)] = FAILURE_REASONS.index("degenerate_normal")
     reason[ok & ~closure] = FAILURE_REASONS.index("friction_cone")
-    return DrawOutcomes(closure.reshape(g, n), reason.reshape(g, n), quality.reshape(g, n))
+    lifted = np.zeros(g * n, dtype=bool)
+    pivots = np.zeros(g * n, dtype=bool)
+    if lift and held.any():
+        regions = draws.shapes.regions
+        f = field[held]
+        c1, c2, com = contacts.c1[held], contacts.c2[held], regions.center_of_mass[f]
+        reach = regions.extent(f, c1, side_normal(com, c1, c2))
+        verdict = judge(c1, c2, contacts.w1[held], contacts.w2[held], regions.area[f], com, reach, gamma[held],
+                        draws.pressure[f], settings)
+        lifted[held], pivots[held] = verdict.lifted, verdict.pivots
+        reason[np.flatnonzero(held)[~verdict.lifted]] = len(PLANAR_REASONS) + verdict.reason[~verdict.lifted]
+    return DrawOutcomes(closure.reshape(g, n), lifted.reshape(g, n) if lift else None, reason.reshape(g, n),
+                        pivots.reshape(g, n), quality.reshape(g, n))
 
 
-def estimate_p_f(grasps, draws: EvaluationDraws, settings: GraspSettings) -> list[QualityEstimate]:
-    """P_F estimates of G grasps on the same paired draws (see :func:`evaluate_draws`)."""
-    return evaluate_draws(grasps, draws, settings).estimates
+def estimate_p_f(grasps, draws: EvaluationDraws, settings: GraspSettings, lift: bool = True) -> list[QualityEstimate]:
+    """P_F and P_L estimates of G grasps on the same paired draws (see :func:`evaluate_draws`)."""
+    return evaluate_draws(grasps, draws, settings, lift).estimates
 
 
 def as_starts(grasps) -> np.ndarray:
@@ -176,4 +215,5 @@ def default_streams(seed: int, scene_name: str, realisation: int = 0):
     """The named random streams of one belief's evaluation (see harness.seeding)."""
     from harness.seeding import stream
 
-    return tuple(stream(seed, scene_name, realisation, purpose) for purpose in ("shapes", "approach", "friction"))
+    return tuple(stream(seed, scene_name, realisation, purpose)
+                 for purpose in ("shapes", "approach", "friction", "pressure"))

@@ -1,11 +1,12 @@
 """Tables and statistics from an experiment's ledger (``gpis-harness report DIR``).
 
 Per scene and planner: trials, physical success on posterior samples and on the true
-shape (Wilson 95 % intervals), analytic P_F (pooled over the realisations' draws, Wilson),
-mean Ferrari-Canny, median plan time, and whether every expected row is present. Paired
-comparisons use the common random numbers: trial i of two planners on the same cell met
-the same shape and the same approach noise. Calibration compares each plan's analytic P_F
-with its physical success.
+shape (Wilson 95 % intervals), analytic P_F and P_L (pooled over the realisations' draws,
+Wilson), mean Ferrari-Canny, median plan time, and whether every expected row is present.
+Paired comparisons use the common random numbers: trial i of two planners on the same
+cell met the same shape and the same approach noise. Calibration compares each plan's
+analytic P_F and P_L with its physical success, and the analytic verdict of each draw
+with the outcome of the posterior trial that shares it.
 """
 
 from __future__ import annotations
@@ -26,7 +27,10 @@ BASELINE = "mean-shape"
 ALL = "all"
 SUMMARY_COLUMNS = ["scene", "planner", "n_trials", "success_rate", "success_ci_low", "success_ci_high",
                    "truth_success_rate", "truth_ci_low", "truth_ci_high", "p_f", "p_f_ci_low", "p_f_ci_high",
-                   "ferrari_canny_mean", "plan_time_median_s", "plans_ok", "complete"]
+                   "p_l", "p_l_ci_low", "p_l_ci_high", "ferrari_canny_mean", "plan_time_median_s", "plans_ok",
+                   "complete"]
+#: The analytic metrics calibrated against physical success.
+METRICS = ("p_f", "p_l")
 RELIABILITY_BINS = 10
 
 
@@ -66,24 +70,33 @@ def summary(data: dict) -> pd.DataFrame:
             post, truth = t[t.shapes == "posterior"], t[t.shapes == "truth"]
             k, n = int((post.outcome == "success").sum()), len(post)
             kt, nt = int((truth.outcome == "success").sum()), len(truth)
-            successes = float((a.p_f * a.draws).round().sum())
-            # Plans with nothing executed count as P_F 0 over the same number of draws.
+            # Plans with nothing executed count as P_F and P_L 0 over the same number of draws.
             draws = int(config["analytic_draws"]) * int((p.executed == 0).sum()) + int(a.draws.sum())
+            pooled = {m: _pooled(a[m], a.draws, draws) for m in METRICS}
             lo, hi = wilson_interval(k, n) if n else (np.nan, np.nan)
             tlo, thi = wilson_interval(kt, nt) if nt else (np.nan, np.nan)
-            plo, phi = wilson_interval(successes, draws) if draws else (np.nan, np.nan)
             fc = (a.ferrari_canny_mean.sum() / len(p)) if len(p) else np.nan
             rows.append({
                 "scene": scene, "planner": planner, "n_trials": n,
                 "success_rate": k / n if n else np.nan, "success_ci_low": float(lo), "success_ci_high": float(hi),
                 "truth_success_rate": kt / nt if nt else np.nan, "truth_ci_low": float(tlo),
                 "truth_ci_high": float(thi),
-                "p_f": successes / draws if draws else np.nan, "p_f_ci_low": float(plo), "p_f_ci_high": float(phi),
+                **{f"{m}{suffix}": v for m in METRICS for suffix, v in zip(("", "_ci_low", "_ci_high"), pooled[m])},
                 "ferrari_canny_mean": fc, "plan_time_median_s": float(p.plan_time_s.median()) if len(p) else np.nan,
                 "plans_ok": f"{int(p.executed.sum())}/{realisations * n_scenes}",
                 "complete": bool(len(p) == realisations * n_scenes and len(t) == realisations * n_scenes * per_plan),
             })
     return pd.DataFrame(rows, columns=SUMMARY_COLUMNS)
+
+
+def _pooled(estimates: pd.Series, draws: pd.Series, total: int) -> tuple[float, float, float]:
+    """A metric pooled over plans (estimate x draws successes out of ``total`` draws) with
+    its Wilson interval; NaN when a plan has no estimate (a ledger written before P_L)."""
+    if not total or estimates.isna().any():
+        return np.nan, np.nan, np.nan
+    successes = float((estimates * draws).round().sum())
+    lo, hi = wilson_interval(successes, total)
+    return successes / total, float(lo), float(hi)
 
 
 def _paired(trials: pd.DataFrame, a: str, b: str, shapes: str) -> pd.DataFrame:
@@ -164,39 +177,70 @@ def _bootstrap_means(d: np.ndarray, groups: list[np.ndarray], rng: np.random.Gen
 
 
 def calibration(data: dict) -> tuple[pd.DataFrame, pd.DataFrame]:
-    """Per plan: analytic P_F against success on posterior samples. Returns the per-planner
-    table (Brier score over trials, Spearman over plans) and the reliability bins."""
+    """Per plan: analytic P_F and P_L against success on posterior samples. Returns the
+    table per metric and planner (and 'all': Brier score over trials, each trial's
+    forecast its plan's estimate; Spearman over plans) and the reliability bins per
+    metric."""
     plans = data["plans"][data["plans"].executed == 1]
     post = data["trials"][data["trials"].shapes == "posterior"]
     rate = (post.assign(s=(post.outcome == "success").astype(float))
             .groupby(["scene", "realisation", "planner"]).s.agg(["sum", "count"]).reset_index())
     per_plan = plans.merge(data["analytic"], on=["scene", "realisation", "planner"]).merge(
         rate, on=["scene", "realisation", "planner"])
-    rows = []
-    for planner, g in list(per_plan.groupby("planner")) + [(ALL, per_plan)]:
-        if g.empty:
-            continue
-        # Brier over trials: each trial's forecast is its plan's P_F.
-        brier = float((((g.p_f ** 2) * (g["count"] - g["sum"]) + ((1 - g.p_f) ** 2) * g["sum"]).sum())
-                      / g["count"].sum())
-        rate = g["sum"] / g["count"]
-        varied = len(g) > 2 and g.p_f.nunique() > 1 and rate.nunique() > 1  # else undefined
-        rho = stats.spearmanr(g.p_f, rate).statistic if varied else np.nan
-        rows.append({"planner": planner, "plans": len(g), "brier": brier, "spearman": float(rho),
-                     "mean_p_f": float(g.p_f.mean()), "success_rate": float(g["sum"].sum() / g["count"].sum())})
+    rows, bins = [], []
     edges = np.linspace(0, 1, RELIABILITY_BINS + 1)
-    which = np.clip(np.digitize(per_plan.p_f, edges[1:-1]), 0, RELIABILITY_BINS - 1)
-    bins = []
-    for k in range(RELIABILITY_BINS):
-        g = per_plan[which == k]
-        if g.empty:
-            continue
-        s, n = float(g["sum"].sum()), float(g["count"].sum())
-        lo, hi = wilson_interval(s, n)
-        bins.append({"bin_low": edges[k], "bin_high": edges[k + 1], "plans": len(g), "trials": int(n),
-                     "mean_p_f": float(g.p_f.mean()), "success_rate": s / n, "ci_low": float(lo),
-                     "ci_high": float(hi)})
+    for metric in METRICS:
+        known = per_plan[per_plan[metric].notna()]
+        for planner, g in list(known.groupby("planner")) + [(ALL, known)]:
+            if g.empty:
+                continue
+            forecast = g[metric]
+            brier = float((((forecast ** 2) * (g["count"] - g["sum"]) + ((1 - forecast) ** 2) * g["sum"]).sum())
+                          / g["count"].sum())
+            success = g["sum"] / g["count"]
+            varied = len(g) > 2 and forecast.nunique() > 1 and success.nunique() > 1  # else undefined
+            rho = stats.spearmanr(forecast, success).statistic if varied else np.nan
+            rows.append({"metric": metric, "planner": planner, "plans": len(g), "brier": brier, "spearman": float(rho),
+                         "mean_estimate": float(forecast.mean()),
+                         "success_rate": float(g["sum"].sum() / g["count"].sum())})
+        which = np.clip(np.digitize(known[metric], edges[1:-1]), 0, RELIABILITY_BINS - 1)
+        for k in range(RELIABILITY_BINS):
+            g = known[which == k]
+            if g.empty:
+                continue
+            s, n = float(g["sum"].sum()), float(g["count"].sum())
+            lo, hi = wilson_interval(s, n)
+            bins.append({"metric": metric, "bin_low": edges[k], "bin_high": edges[k + 1], "plans": len(g),
+                         "trials": int(n), "mean_estimate": float(g[metric].mean()), "success_rate": s / n,
+                         "ci_low": float(lo), "ci_high": float(hi)})
     return pd.DataFrame(rows), pd.DataFrame(bins)
+
+
+def reasons(data: dict) -> pd.DataFrame:
+    """The analytic verdict of each posterior trial's draw ('lifted' or the first failure
+    reason) against the trial's physical outcome: counts per planner and for 'all'."""
+    from harness.quality import FAILURE_REASONS
+
+    analytic = data["analytic"].dropna(subset=["reasons"])
+    post = data["trials"][data["trials"].shapes == "posterior"]
+    keys = ["scene", "realisation", "planner", "trial"]
+    verdicts = pd.DataFrame([(r.scene, r.realisation, r.planner, i, v) for r in analytic.itertuples()
+                             for i, v in enumerate(r.reasons.split(",") if r.reasons else [])],
+                            columns=keys + ["analytic"])
+    paired = post[keys + ["outcome"]].merge(verdicts, on=keys)
+    if paired.empty:
+        return pd.DataFrame()
+    order = ["lifted", *FAILURE_REASONS]
+    tables = []
+    for planner, g in [(ALL, paired)] + list(paired.groupby("planner", sort=False)):
+        t = pd.crosstab(g.analytic, g.outcome).reindex([v for v in order if v in set(g.analytic)])
+        tables.append(t.reset_index().assign(planner=planner))
+    table = pd.concat(tables, ignore_index=True).fillna(0)
+    outcomes = [c for c in table.columns if c not in ("planner", "analytic")]
+    table[outcomes] = table[outcomes].astype(int)
+    labels = [ALL] + expected(data["config"])[1]
+    table = table.sort_values("planner", key=lambda c: c.map({p: k for k, p in enumerate(labels)}), kind="stable")
+    return table[["planner", "analytic", *outcomes]].reset_index(drop=True)
 
 
 def failures(data: dict) -> pd.DataFrame:
@@ -225,6 +269,7 @@ def display_table(s: pd.DataFrame) -> pd.DataFrame:
         "success (true shape)": [_fmt_rate(*v) for v in zip(s.truth_success_rate, s.truth_ci_low,
                                                              s.truth_ci_high)],
         "analytic P_F": [_fmt_rate(*v) for v in zip(s.p_f, s.p_f_ci_low, s.p_f_ci_high)],
+        "analytic P_L": [_fmt_rate(*v) for v in zip(s.p_l, s.p_l_ci_low, s.p_l_ci_high)],
         "Ferrari-Canny": s.ferrari_canny_mean.map(lambda v: "–" if pd.isna(v) else f"{v:.3f}"),
         "plan time (s)": s.plan_time_median_s.map(lambda v: "–" if pd.isna(v) else f"{v:.2f}"),
         "plans": s.plans_ok, "complete": s.complete.map({True: "yes", False: "NO"}),
@@ -260,11 +305,13 @@ def write_report(out_dir: Path, figures: bool = True) -> dict:
     comp = comparisons(data, seed=int(data["config"]["seed"]))
     cal, bins = calibration(data)
     fails = failures(data)
+    verdicts = reasons(data)
     s.to_csv(out_dir / "summary.csv", index=False)
     comp.to_csv(out_dir / "comparisons.csv", index=False)
     cal.to_csv(out_dir / "calibration.csv", index=False)
     bins.to_csv(out_dir / "reliability.csv", index=False)
     fails.to_csv(out_dir / "failures.csv", index=False)
+    verdicts.to_csv(out_dir / "reasons.csv", index=False)
     md = ["# " + data["config"]["name"], "", display_table(s).to_markdown(index=False), "",
           "## Paired comparisons (success difference, posterior samples)", ""]
     if not comp.empty:
@@ -274,9 +321,12 @@ def write_report(out_dir: Path, figures: bool = True) -> dict:
         shown["McNemar p"] = shown.mcnemar_p.map(lambda p: f"{p:.3g}")
         md.append(shown[["scene", "planner", "versus", "pairs", "difference [95% CI]", "McNemar p"]]
                   .to_markdown(index=False))
-    md += ["", "## Calibration of analytic P_F against physical success", "",
+    md += ["", "## Calibration of analytic P_F and P_L against physical success", "",
            cal.to_markdown(index=False, floatfmt=".3f") if not cal.empty else "(no executed plans)", "",
-           "## Trial outcomes", "", fails.to_markdown(index=False), ""]
+           "## Trial outcomes", "", fails.to_markdown(index=False), "",
+           "## Analytic verdict of each posterior trial's draw against its physical outcome (all planners)", "",
+           (verdicts[verdicts.planner == ALL].drop(columns="planner").to_markdown(index=False)
+            if not verdicts.empty else "(no analytic verdicts)"), ""]
     (out_dir / "summary.md").write_text("\n".join(md))
     (out_dir / "summary.tex").write_text(_latex(s))
     for table in ("trials", "plans"):

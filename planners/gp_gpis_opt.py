@@ -96,8 +96,7 @@ class GPGPISOpt(Planner):
         chosen, estimate, message = None, None, ""
         if order and self.finalists > 1:
             finalists = order[: self.finalists]
-            shapes, approach, friction = rerank_rng.spawn(3)
-            draws = draw_evaluation(belief, self.rerank_samples, shapes, approach, friction)
+            draws = draw_evaluation(belief, self.rerank_samples, *rerank_rng.spawn(4))
             est = estimate_p_f(jaws[finalists], draws, problem.settings)
             pick = int(np.argmax([e.p_f for e in est]))
             chosen, estimate = finalists[pick], est[pick].p_f

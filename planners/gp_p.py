@@ -30,8 +30,7 @@ class GPP(Planner):
                       estimate_of=lambda best: best, record=record)
 
     def _setup(self, problem: Problem, rng: np.random.Generator):
-        shapes, approach, friction = rng.spawn(3)
-        return problem, draw_evaluation(problem.belief, self.samples, shapes, approach, friction)
+        return problem, draw_evaluation(problem.belief, self.samples, *rng.spawn(4))
 
     @staticmethod
     def _score(grasps, state):

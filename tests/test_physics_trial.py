@@ -115,7 +115,7 @@ def test_the_same_seed_gives_the_same_trials_and_outcomes():
 
     def run_once():
         belief = build_belief(scene, stream(3, "marker", 0, "sensor"))
-        shapes_rng, approach_rng, _ = default_streams(3, "marker")
+        shapes_rng, approach_rng, *_ = default_streams(3, "marker")
         polygons = sample_polygons(belief, 5, shapes_rng)
         trials = make_trials(resolve(scene), grasp, polygons, approach_rng.standard_normal((5, 2, 2)))
         with Runner(batch_size=3) as runner:  # two batches: a world reset in between

@@ -64,7 +64,8 @@ def library_trials(grasps_per_scene: int = 12, seed: int = 0, ranked: bool = Tru
         grasps = generate(belief, count, stream(seed, name, 0, "study", "grasps"), settings)
         if ranked:
             draws = draw_evaluation(belief, RANKED_DRAWS, *(stream(seed, name, 0, "study", k)
-                                                            for k in ("rank-shapes", "rank-approach", "rank-friction")))
+                                                            for k in ("rank-shapes", "rank-approach", "rank-friction",
+                                                                      "rank-pressure")))
             p_f = [e.p_f for e in estimate_p_f(grasps, draws, settings)]
             grasps = grasps[np.argsort(p_f, kind="stable")[::-1][:grasps_per_scene]]
         n = len(grasps)

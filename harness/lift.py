@@ -1,0 +1,153 @@
+"""The lift model: whether a grasp in planar force closure also carries the object's
+weight once lifted, per shape draw, with that draw's mass and centre of mass
+(docs/lift.md).
+
+Once lifted, each plate must carry half the weight (times the lift's peak load factor)
+by friction along the wall, and together they must resist the weight's torque about the
+grasp axis, W d (d: the centre of mass's distance from the line through the contacts),
+by torsional friction over their contact patches. Each plate's patch is a soft-finger
+contact with an elliptic limit surface (Howe and Cutkosky 1996),
+
+    (f_t / (mu N))^2 + (tau / (kappa mu N))^2 <= 1,
+
+so with the weight's share f_t = W / 2 a plate resists at most
+kappa mu N sqrt(1 - (f_t / (mu N))^2) of torque. kappa is the mean lever of the
+friction over the patch. A rigid plate pressed on a rigid wall does not fix its pressure
+distribution (the contact is statically indeterminate): every lever from 0 (all pressure
+at the patch centre) to the patch's half-diagonal (all pressure at two opposite corners)
+is admissible. The model takes kappa uniform on that range, one draw per plate and shape
+draw (the draws' ``pressure`` deviates); docs/lift.md shows that Bullet's contact
+manifolds spread over the same range.
+
+A torque beyond the plates' resistance turns the object about the grasp axis until it
+hangs below the jaws. It is still lifted if, hanging, it clears the table: its extent
+beyond the grasp axis on the side of its centre of mass is less than the lift height
+plus the height of the axis above the table. Otherwise the turn puts it back on the
+table (``weight_torque``). A weight beyond the plates' friction slides it out
+(``weight_slip``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.special import ndtr
+
+from harness.settings import GRAVITY, GraspSettings
+
+#: Failure reasons of the lift, in the order a draw in force closure is classified.
+LIFT_REASONS = ("weight_slip", "weight_torque")
+SLIP, TORQUE = 0, 1
+#: The jaw plates end this far above the table (harness.physics.gripper.TABLE_CLEARANCE).
+PLATE_CLEARANCE = 0.001
+
+
+def patch_height(settings: GraspSettings) -> float:
+    """Vertical extent (m) of a plate's contact patch on the prism's wall: the overlap of
+    the wall (0 to the thickness) with the plate (from PLATE_CLEARANCE above the table
+    to plate_height above the object's top)."""
+    return max(0.0, min(settings.thickness, settings.thickness + settings.plate_height) - PLATE_CLEARANCE)
+
+
+def axis_height(settings: GraspSettings) -> float:
+    """Height (m) of the grasp axis above the table before the lift: the patch's centre."""
+    return PLATE_CLEARANCE + 0.5 * patch_height(settings)
+
+
+def largest_lever(width, height: float) -> np.ndarray:
+    """The largest admissible mean lever of friction over a width x height patch: its
+    half-diagonal (all pressure at two opposite corners)."""
+    return np.hypot(0.5 * np.asarray(width, dtype=float), 0.5 * height)
+
+
+def torque_demand(weight, distance, friction, settings: GraspSettings) -> np.ndarray:
+    """The weight's torque about the grasp axis in units of the plates' friction lever
+    capacity: T = W_l d / (mu N sqrt(1 - (W_l / (2 mu N))^2)), with W_l the weight times
+    the load factor. The plates hold when kappa_1 + kappa_2 >= T; NaN where the weight
+    alone slides the object out."""
+    capacity = np.asarray(friction, dtype=float) * settings.force
+    load = settings.load_factor * np.asarray(weight, dtype=float)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        share = load / (2.0 * capacity)
+        return np.where(share <= 1.0, load * np.asarray(distance) / (capacity * np.sqrt(1.0 - share**2)), np.nan)
+
+
+def hold_probability(demand, lever_1, lever_2) -> np.ndarray:
+    """P(kappa_1 + kappa_2 >= demand) for kappa_i uniform on [0, lever_i]: the chance that
+    the plates resist the torque, a smooth (piecewise quadratic, C1) function of the
+    demand, for surrogates. 0 where the demand is NaN (the weight slides out)."""
+    a = np.minimum(lever_1, lever_2)
+    b = np.maximum(lever_1, lever_2)
+    t = np.asarray(demand, dtype=float)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        below = np.where(t <= a, t**2 / (2 * a * b), np.where(t <= b, (t - 0.5 * a) / b,
+                                                               1.0 - (a + b - t) ** 2 / (2 * a * b)))
+    below = np.where(t <= 0, 0.0, np.where(t >= a + b, 1.0, below))
+    return np.where(np.isnan(t), 0.0, 1.0 - below)
+
+
+@dataclass(frozen=True)
+class LiftVerdict:
+    """Per draw: lifted or not (B,), the lift reason index into LIFT_REASONS (-1 when
+    lifted), and whether the torque turned the object (lifted or not)."""
+
+    lifted: np.ndarray
+    reason: np.ndarray
+    pivots: np.ndarray
+
+
+def judge(c1, c2, w1, w2, area, com, reach, friction, pressure, settings: GraspSettings) -> LiftVerdict:
+    """The lift of B draws in force closure.
+
+    c1, c2 (B, 2): contacts; w1, w2 (B,): the plates' patch widths along the outline;
+    area (B,) and com (B, 2): the draw's region area (m^2) and centre of mass;
+    reach (B,): the region's extent beyond the line c1-c2 on its centre of mass's side;
+    friction (B,): the draw's coefficient; pressure (B, 2): uniform deviates in [0, 1)
+    placing each plate's lever in its admissible range.
+    """
+    weight = settings.density * settings.thickness * GRAVITY * np.asarray(area, dtype=float)
+    distance = line_distance(com, c1, c2)
+    demand = torque_demand(weight, distance, friction, settings)
+    height = patch_height(settings)
+    levers = pressure[:, 0] * largest_lever(w1, height) + pressure[:, 1] * largest_lever(w2, height)
+    slip = np.isnan(demand)
+    pivots = ~slip & (demand > levers)
+    hangs_clear = reach < settings.lift_height + axis_height(settings)
+    reason = np.full(len(weight), -1, dtype=np.int8)
+    reason[slip] = SLIP
+    reason[pivots & ~hangs_clear] = TORQUE
+    return LiftVerdict(reason < 0, reason, pivots)
+
+
+def line_distance(point, c1, c2) -> np.ndarray:
+    """Distance (B,) of points from the lines through c1 and c2 (B, 2 each)."""
+    d = np.asarray(c2, dtype=float) - c1
+    rel = np.asarray(point, dtype=float) - c1
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.abs(rel[:, 0] * d[:, 1] - rel[:, 1] * d[:, 0]) / np.linalg.norm(d, axis=1)
+
+
+def side_normal(point, c1, c2) -> np.ndarray:
+    """Unit normals (B, 2) of the lines c1-c2, pointing to the side of ``point``."""
+    d = np.asarray(c2, dtype=float) - c1
+    n = np.column_stack([-d[:, 1], d[:, 0]])
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    side = np.sign(np.einsum("ij,ij->i", np.asarray(point, dtype=float) - c1, n))
+    return n * np.where(side == 0, 1.0, side)[:, None]
+
+
+def smooth_lift(distance, distance_sd, weight, friction, w1, w2, reach, reach_scale, settings: GraspSettings):
+    """A smooth lift probability for surrogates: the hold probability averaged over a
+    Gaussian centre-of-mass distance (mean ``distance``, std ``distance_sd``; 3-point
+    Gauss-Hermite), and, where the plates do not hold, the probability that the object
+    hangs clear, Phi((clearance - reach) / reach_scale)."""
+    height = patch_height(settings)
+    l1, l2 = largest_lever(w1, height), largest_lever(w2, height)
+    nodes, weights = (-math.sqrt(3.0), 0.0, math.sqrt(3.0)), (1 / 6, 2 / 3, 1 / 6)
+    hold = sum(w * hold_probability(torque_demand(weight, np.abs(distance + z * distance_sd), friction, settings),
+                                    l1, l2) for z, w in zip(nodes, weights))
+    clear = ndtr((settings.lift_height + axis_height(settings) - reach) / reach_scale)
+    slides = np.isnan(torque_demand(weight, 0.0, friction, settings))
+    return np.where(slides, 0.0, hold + (1.0 - hold) * clear)

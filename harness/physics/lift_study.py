@@ -1,0 +1,219 @@
+"""The lift model against the physics (``gpis-harness bench lift``): bars gripped across
+their width at growing offsets from their centre of mass, where the analytic P_L and the
+simulated success fall through 0.5; and the friction levers Bullet's contact manifolds
+give the jaw plates on the library's trial set.
+
+A bar is a fully observed rectangle (its true shape: no shape uncertainty), so the
+offset is the only thing that changes along a sweep. Trials and the analytic estimate
+use the same approach-noise deviates; the analytic estimate adds pressure deviates (the
+lift model's lever draws, harness.lift) and more draws than the trials, so its curve is
+smooth.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from harness.grasp import SDFBatch
+from harness.physics.simulate import make_trials, truth_polygon
+from harness.physics.trial import Runner
+from harness.quality import EvaluationDraws, evaluate_draws
+from harness.scene import Scene, parse_scene
+from harness.seeding import stream
+from harness.settings import resolve
+
+#: Approach noise of the sweeps (m): small, so that the offset is what varies.
+SIGMA_G = 0.001
+#: Offsets are this far apart (m).
+STEP = 0.005
+#: Analytic draws per offset (the first ``trials`` are the trials' own).
+ANALYTIC_DRAWS = 400
+#: The jaws start this far outside the bar's faces (m).
+CLEARANCE = 0.01
+#: A trial whose object turned in the gripper by more than this (rad) turned.
+TURNED = 0.3
+
+
+@dataclass(frozen=True)
+class Bar:
+    """A bar (m, kg/m^3, N) lying along x, gripped across its width by jaws whose line of
+    action crosses the bar at an offset from its centre."""
+
+    length: float
+    density: float
+    friction: float
+    force: float
+    width: float = 0.03
+    thickness: float = 0.03
+
+    @property
+    def label(self) -> str:
+        return (f"{self.length * 100:g} x {self.width * 100:g} x {self.thickness * 100:g} cm, "
+                f"{self.density:g} kg/m^3, mu {self.friction:g}, {self.force:g} N")
+
+    @property
+    def mass(self) -> float:
+        return self.density * self.length * self.width * self.thickness
+
+    def scene(self) -> Scene:
+        data = {"name": "bar", "grid": {"size": 40, "extent": 0.2},
+                "shape": {"type": "rectangle", "width": self.length, "height": self.width, "center": [0.0, 0.0]},
+                "sensor": {"noise": 0.0005},
+                "physics": {"thickness": self.thickness, "density": self.density, "friction": self.friction},
+                "gripper": {"opening": 0.1, "jaw_width": 0.01, "force": self.force}}
+        return parse_scene(data, f"<bar {self.label}>", Path("."))
+
+    def offsets(self) -> np.ndarray:
+        """From the centre to 5 mm short of the bar's end."""
+        return np.arange(0.0, 0.5 * self.length - STEP + 1e-9, STEP)
+
+    def grasp(self, offset: float) -> np.ndarray:
+        half = 0.5 * self.width + CLEARANCE
+        return np.array([[offset, -half], [offset, half]])
+
+
+#: The validation rows: lengths, densities, frictions, grip forces, thicknesses and
+#: widths chosen so that each bar stops being lifted within its length (a bar short and
+#: light enough to hang clear of the table at every offset tells nothing).
+BARS = (
+    Bar(0.18, 1000.0, 0.5, 8.0),
+    Bar(0.18, 2000.0, 0.5, 20.0),
+    Bar(0.18, 700.0, 0.4, 6.0, thickness=0.02),
+    Bar(0.16, 3000.0, 0.8, 10.0),
+    Bar(0.16, 1500.0, 0.4, 12.0, width=0.04),
+    Bar(0.14, 2500.0, 0.5, 20.0, thickness=0.05),
+    Bar(0.14, 4000.0, 0.6, 12.0),
+    Bar(0.12, 6000.0, 0.5, 10.0),
+)
+
+
+def sweep(bar: Bar, trials: int = 12, seed: int = 0, runner: Runner | None = None) -> list[dict]:
+    """Per offset: simulated success, the fraction of trials that turned (pivot above
+    TURNED), the outcomes and the angles of the turned trials that ended held; the
+    analytic P_L and the analytic fraction of draws that turn."""
+    scene = bar.scene()
+    settings = resolve(scene, {"sigma_g": SIGMA_G})
+    n = max(trials, ANALYTIC_DRAWS)
+    approach = stream(seed, "lift-bench", bar.label, "approach").standard_normal((n, 2, 2))
+    pressure = stream(seed, "lift-bench", bar.label, "pressure").random((n, 2))
+    truth = SDFBatch(scene.grid, np.repeat(scene.true_sdf[None], n, axis=0),
+                     np.repeat(scene.true_sdf_gradient[None], n, axis=0))
+    draws = EvaluationDraws(truth, approach, np.zeros(n), pressure, 1.0)
+    offsets = bar.offsets()
+    polygon = truth_polygon(scene)
+    batch = [t for d in offsets for t in make_trials(settings, bar.grasp(d), [polygon], approach[:trials])]
+    own = runner is None
+    runner = runner or Runner()
+    try:
+        results = runner.run(batch)
+    finally:
+        if own:
+            runner.close()
+    rows = []
+    for k, d in enumerate(offsets):
+        mine = results[k * trials:(k + 1) * trials]
+        analytic = evaluate_draws(bar.grasp(d), draws, settings)
+        rows.append({"offset": float(d), "success": float(np.mean([r.outcome == "success" for r in mine])),
+                     "turned": float(np.mean([r.pivot > TURNED for r in mine])),
+                     "p_l": float(analytic.lifted.mean()), "turns": float(analytic.pivots.mean()),
+                     "outcomes": dict(Counter(r.outcome for r in mine)),
+                     "held_turns": [float(r.pivot) for r in mine if r.outcome == "success" and r.pivot > TURNED]})
+    return rows
+
+
+def crossing(offsets, values) -> float | None:
+    """Where ``values`` first falls through 0.5 along ``offsets`` (linear between the two
+    offsets around the fall), or None when it never does."""
+    for i in range(1, len(offsets)):
+        if values[i - 1] >= 0.5 > values[i]:
+            return float(offsets[i - 1] + (values[i - 1] - 0.5) / (values[i - 1] - values[i])
+                         * (offsets[i] - offsets[i - 1]))
+    return None
+
+
+def _relative(model: float | None, sim: float | None) -> float | None:
+    return None if model is None or sim is None else (model - sim) / sim
+
+
+def validate(bars=BARS, trials: int = 12, seed: int = 0) -> dict:
+    """Every bar's sweep and its crossings: where P_L and simulated success fall through
+    0.5, and where the analytic and the simulated share of draws that did not turn do;
+    the relative errors and the largest of them; per bar, the median angle at which the
+    turned trials that ended held had stopped, and the simulated failures by outcome."""
+    rows = []
+    with Runner() as runner:
+        for bar in bars:
+            points = sweep(bar, trials, seed, runner)
+            x = [p["offset"] for p in points]
+            sim = crossing(x, [p["success"] for p in points])
+            model = crossing(x, [p["p_l"] for p in points])
+            sim_turn = crossing(x, [1 - p["turned"] for p in points])
+            model_turn = crossing(x, [1 - p["turns"] for p in points])
+            held = [a for p in points for a in p["held_turns"]]
+            failed = Counter()
+            for p in points:
+                failed.update({k: v for k, v in p["outcomes"].items() if k != "success"})
+            rows.append({"bar": bar.label, "mass_kg": bar.mass, "success_at": sim, "p_l_at": model,
+                         "error": _relative(model, sim), "turning_at": sim_turn, "model_turning_at": model_turn,
+                         "turning_error": _relative(model_turn, sim_turn),
+                         "held_turn_median": float(np.median(held)) if held else None, "failures": dict(failed),
+                         "points": points})
+
+    def largest(key):
+        values = [abs(r[key]) for r in rows if r[key] is not None]
+        return max(values) if values else None
+
+    return {"trials_per_offset": trials, "analytic_draws": max(trials, ANALYTIC_DRAWS), "sigma_g": SIGMA_G,
+            "rows": rows, "largest_error": largest("error"), "largest_turning_error": largest("turning_error"),
+            "missing": sum(r["error"] is None for r in rows)}
+
+
+def manifold_levers(grasps_per_scene: int = 6, seed: int = 0) -> dict:
+    """The friction lever of each jaw plate's contact manifold on the library trial set,
+    once the jaws have stalled: sum_k N_k r_k / sum_k N_k over the manifold's points (r_k:
+    distance from the plate's pressure centre across the grasp axis), as a fraction of
+    the lift model's largest lever (the patch's half-diagonal, here for a line contact
+    over the plate's reach: half the patch height). Quartiles and the share of plates
+    held by a single point."""
+    import pybullet as pb
+
+    from harness.lift import PLATE_CLEARANCE
+    from harness.physics.study import library_trials
+    from harness.physics.trial import _Slot, approach_blocked
+
+    trial_set = library_trials(grasps_per_scene, seed)
+    fractions, single = [], 0
+    with Runner() as runner:
+        for trial in trial_set.trials:
+            if trial.polygon.is_empty or approach_blocked(trial):
+                continue
+            runner._reset_world()
+            slot = _Slot(runner, 0, trial, (0.0, 0.0), None)
+            while slot.phase == "close" and slot.result is None:
+                slot.before_step()
+                pb.stepSimulation(physicsClientId=runner.client)
+                slot.after_step()
+            if slot.result is not None:
+                continue
+            axis = np.array([*trial.axis, 0.0])
+            half = 0.5 * (trial.thickness - PLATE_CLEARANCE)
+            points = pb.getContactPoints(slot.obj, slot.grip, physicsClientId=runner.client)
+            for jaw in trial.gripper.jaw_links:
+                mine = [(np.array(p[5]), p[9]) for p in points if p[4] == jaw and p[9] > 1e-6]
+                if not mine:
+                    continue
+                where = np.array([q for q, _ in mine])
+                force = np.array([f for _, f in mine])
+                rel = where - (where * force[:, None]).sum(axis=0) / force.sum()
+                rel -= np.outer(rel @ axis, axis)
+                fractions.append(float((np.linalg.norm(rel, axis=1) * force).sum() / force.sum() / half))
+                single += len(mine) == 1
+    f = np.array(fractions)
+    return {"plates": len(f), "quartiles": [float(q) for q in np.percentile(f, [25, 50, 75])] if len(f) else [],
+            "mean": float(f.mean()) if len(f) else math.nan, "single_point": single / max(len(f), 1),
+            "beyond_largest": float(np.mean(f > 1.0)) if len(f) else math.nan}

@@ -1,0 +1,178 @@
+"""The lift model against closed forms: the weight carried by friction through the centre
+of mass, the elliptic limit surface's torque capacity, the lever distribution, the hang
+test, and P_L on paired draws."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from harness.grasp import PATCH_DEPTH, SDFBatch, find_contacts
+from harness.lift import (PLATE_CLEARANCE, axis_height, hold_probability, judge, largest_lever, patch_height,
+                          smooth_lift, torque_demand)
+from harness.quality import FAILURE_REASONS, EvaluationDraws, evaluate_draws
+from harness.scene import load_scene
+from harness.settings import GRAVITY, resolve
+
+RECTANGLE_AREA = 0.06 * 0.03
+
+
+
+
+def _exact_draws(scene, n: int, pressure=None) -> EvaluationDraws:
+    truth = SDFBatch(scene.grid, np.repeat(scene.true_sdf[None], n, axis=0),
+                     np.repeat(scene.true_sdf_gradient[None], n, axis=0))
+    if pressure is None:
+        pressure = np.random.default_rng(0).random((n, 2))
+    return EvaluationDraws(truth, np.zeros((n, 2, 2)), np.zeros(n), pressure, 1.0)
+
+
+def test_a_grasp_through_the_centre_of_mass_needs_only_two_mu_n_above_the_weight():
+    """Through the centre of mass there is no torque: the plates lift the rectangle
+    exactly when mu * 2N >= load factor * m g (weight_slip otherwise), whatever the
+    levers."""
+    scene = load_scene("rectangle")
+    base = resolve(scene, {"sigma_g": 0.0})
+    grasp = np.array([[-0.045, 0.0], [0.045, 0.0]])  # along x through the centre, across the short faces
+    mass_limit = 2 * base.friction * base.force / (base.load_factor * GRAVITY)
+    density_limit = mass_limit / (RECTANGLE_AREA * base.thickness)
+    draws = _exact_draws(scene, 50)
+    for factor, lifted in ((0.98, True), (1.02, False)):
+        settings = replace(base, density=factor * density_limit)
+        out = evaluate_draws(grasp, draws, settings)
+        assert out.closure.all()
+        assert out.lifted.all() == lifted and out.lifted.any() == lifted
+        if not lifted:
+            assert (out.reason == FAILURE_REASONS.index("weight_slip")).all()
+
+
+def test_the_area_and_centre_of_mass_of_a_draw_are_the_rectangles():
+    scene = load_scene("rectangle")
+    regions = _exact_draws(scene, 2).shapes.regions
+    assert regions.area[0] == pytest.approx(RECTANGLE_AREA, rel=0.01)
+    np.testing.assert_allclose(regions.center_of_mass[0], [0.0, 0.0], atol=1e-4)
+    # The extent along +x and +y from the centre: half the sides, within half a cell (2.5 mm).
+    reach = regions.extent(np.array([0, 0]), np.zeros((2, 2)), np.array([[1.0, 0.0], [0.0, 1.0]]))
+    np.testing.assert_allclose(reach, [0.03, 0.015], atol=0.5 * scene.grid.cell)
+
+
+def test_a_flat_face_gives_a_plate_wide_patch_and_a_disk_a_line():
+    jaw = 0.01
+    rect = load_scene("rectangle")
+    c = find_contacts(SDFBatch(rect.grid, rect.true_sdf, rect.true_sdf_gradient), [[-0.045, 0.0]], [[0.045, 0.0]],
+                      jaw)
+    assert c.w1[0] == pytest.approx(jaw) and c.w2[0] == pytest.approx(jaw)
+    disk = load_scene("disk", {"shape": {"radius": 0.01}})
+    c = find_contacts(SDFBatch(disk.grid, disk.true_sdf, disk.true_sdf_gradient), [[-0.045, 0.0]], [[0.045, 0.0]],
+                      jaw)
+    # A 1 cm radius is 0.32 mm below the plate 2.5 mm off the axis (within PATCH_DEPTH) and
+    # 1.34 mm below it at the plate's edges (5 mm off): the middle three of five lines touch.
+    assert 10.0 - math.sqrt(100.0 - 2.5**2) < PATCH_DEPTH * 1e3 < 10.0 - math.sqrt(100.0 - 5.0**2)
+    assert c.w1[0] == pytest.approx(0.5 * jaw) and c.w2[0] == pytest.approx(0.5 * jaw)
+
+
+def test_the_elliptic_limit_surface_gives_the_torque_capacity_of_each_plate():
+    """The largest torsion with the weight's share f_t on the ellipse (f/(mu N))^2 +
+    (tau/(kappa mu N))^2 <= 1, found by brute force over the boundary, against the closed
+    form kappa mu N sqrt(1 - (f_t/(mu N))^2) that torque_demand divides by."""
+    scene = load_scene("rectangle")
+    settings = resolve(scene)
+    mu_n = settings.friction * settings.force
+    kappa = 0.012
+    theta = np.linspace(0.0, 2 * math.pi, 200_001)
+    boundary_f, boundary_tau = mu_n * np.cos(theta), kappa * mu_n * np.sin(theta)
+    for weight in (0.5, 3.0, 9.0):
+        share = settings.load_factor * weight / 2
+        brute = boundary_tau[boundary_f >= share].max()
+        distance = 0.02
+        demand = torque_demand(weight, distance, settings.friction, settings)
+        # The plates hold exactly when 2 kappa >= demand, i.e. when 2 * brute >= load * d.
+        assert 2 * brute == pytest.approx(settings.load_factor * weight * distance * 2 * kappa / demand, rel=2e-5)
+
+
+def test_the_largest_lever_is_the_half_diagonal_and_the_mean_lever_of_a_line_is_uniform_pressures():
+    """A patch's largest admissible lever is its half-diagonal (two opposite corners); for a
+    line contact (no width) the model's mean lever, half the largest, equals the lever of
+    uniform pressure along the line, h/4 (numerical integration)."""
+    assert largest_lever(0.01, 0.03) == pytest.approx(math.hypot(0.005, 0.015))
+    h = 0.029
+    z = (np.arange(100_000) + 0.5) / 100_000 * h - h / 2
+    assert 0.5 * largest_lever(0.0, h) == pytest.approx(np.abs(z).mean(), rel=1e-6)
+    assert np.abs(z).mean() == pytest.approx(h / 4, rel=1e-6)
+
+
+def test_hold_probability_is_the_chance_two_uniform_levers_resist_the_demand():
+    rng = np.random.default_rng(4)
+    a, b = 0.008, 0.015
+    levers = rng.random((400_000, 2)) * [a, b]
+    for demand in (0.0, 0.004, 0.008, 0.011, 0.015, 0.02, 0.023, 0.03):
+        simulated = np.mean(levers.sum(axis=1) >= demand)
+        assert hold_probability(demand, a, b) == pytest.approx(simulated, abs=0.003)
+    assert hold_probability(np.nan, a, b) == 0.0
+    # C1: one-sided finite differences agree at the piece boundaries.
+    for knot in (a, b):
+        left = (hold_probability(knot, a, b) - hold_probability(knot - 1e-7, a, b)) / 1e-7
+        right = (hold_probability(knot + 1e-7, a, b) - hold_probability(knot, a, b)) / 1e-7
+        assert left == pytest.approx(right, rel=1e-4)
+
+
+def test_a_turning_object_is_lifted_only_if_it_hangs_clear_of_the_table():
+    """Off the centre of mass with levers at zero the plates turn any object; it is lifted
+    when its reach beyond the grasp axis is below the lift height plus the axis height."""
+    scene = load_scene("rectangle")
+    settings = resolve(scene)
+    clearance = settings.lift_height + axis_height(settings)
+    assert axis_height(settings) == pytest.approx(PLATE_CLEARANCE + 0.5 * patch_height(settings))
+    assert patch_height(settings) == pytest.approx(settings.thickness - PLATE_CLEARANCE)
+    c1, c2 = np.array([[0.0, -0.015]] * 2), np.array([[0.0, 0.015]] * 2)
+    com = np.array([[0.03, 0.0]] * 2)
+    reach = np.array([clearance - 1e-4, clearance + 1e-4])
+    verdict = judge(c1, c2, np.full(2, 0.01), np.full(2, 0.01), np.full(2, RECTANGLE_AREA), com, reach,
+                    np.full(2, 0.5), np.zeros((2, 2)), settings)
+    assert verdict.pivots.all()
+    assert verdict.lifted.tolist() == [True, False]
+    assert verdict.reason.tolist() == [-1, 1]
+
+
+def test_p_l_never_exceeds_p_f_and_its_reasons_partition_the_draws():
+    scene = load_scene("stapler")
+    from harness.belief import build_belief
+    from harness.quality import default_streams, draw_evaluation
+    from harness.seeding import stream
+
+    belief = build_belief(scene, stream(0, "stapler", 0, "sensor"))
+    draws = draw_evaluation(belief, 400, *default_streams(0, "stapler"))
+    grasps = np.array([[[-0.03, -0.04], [-0.03, 0.03]], [[0.04, -0.04], [0.04, 0.03]], [[0.0, -0.04], [0.0, 0.03]]])
+    out = evaluate_draws(grasps, draws, resolve(scene))
+    for est, lifted, closure in zip(out.estimates, out.lifted, out.closure):
+        assert not (lifted & ~closure).any()
+        assert est.p_l <= est.p_f
+        assert round(est.p_l * 400) + sum(est.failures.values()) == 400
+        assert est.p_l_ci_low <= est.p_l <= est.p_l_ci_high
+    # A weightless object lifts whenever it is in force closure.
+    light = replace(resolve(scene), density=1e-9)
+    out = evaluate_draws(grasps, draws, light)
+    np.testing.assert_array_equal(out.lifted, out.closure)
+
+
+def test_the_smooth_lift_is_the_average_of_the_draws_verdicts():
+    """smooth_lift for a Gaussian centre-of-mass distance against Monte Carlo of judge with
+    uniform levers and the same hang test (a smooth step of the reach)."""
+    scene = load_scene("rectangle")
+    settings = resolve(scene)
+    rng = np.random.default_rng(9)
+    n = 200_000
+    mean_d, sd = 0.012, 0.004
+    weight = 3.0
+    area = weight / (settings.density * settings.thickness * GRAVITY)
+    distance = np.abs(mean_d + sd * rng.standard_normal(n))
+    c1, c2 = np.tile([0.0, -0.015], (n, 1)), np.tile([0.0, 0.015], (n, 1))
+    com = np.column_stack([distance, np.zeros(n)])
+    reach = np.full(n, 1.0)  # never clears: the plates must hold
+    verdict = judge(c1, c2, np.zeros(n), np.zeros(n), np.full(n, area), com, reach, np.full(n, settings.friction),
+                    rng.random((n, 2)), settings)
+    smooth = smooth_lift(mean_d, sd, weight, settings.friction, 0.0, 0.0, 1.0, 1e-6, settings)
+    assert smooth == pytest.approx(verdict.lifted.mean(), abs=0.01)
