@@ -172,10 +172,12 @@ class Contacts:
     """Where each jaw first meets the zero level: points c1, c2 (B, 2), outward unit
     normals n1, n2 (B, 2) (NaN where there is no contact) and a status (B,) per grasp:
     OK, MISSED (no object between the jaws), TOO_WIDE (a jaw starts inside the
-    object) or DEGENERATE (a vanishing gradient at a contact). w1, w2 (B,): each plate's
-    contact patch along the outline, the spread across the plate of the lines that meet
-    the surface within PATCH_DEPTH of the first contact (0 for a point or curved contact,
-    up to the plate's width for a flat face; NaN where there is no contact)."""
+    object) or DEGENERATE (a vanishing gradient at a contact). Each plate's contact patch
+    is made of the plate lines that meet the surface within PATCH_DEPTH of its first
+    contact: patch1, patch2 (B, K, 2) hold where each of the K lines meets it (NaN for a
+    line that does not touch, and where there is no contact), and w1, w2 (B,) the
+    patch's extent along the outline (0 for a point or curved contact, up to the plate's
+    width for a flat face; NaN where there is no contact)."""
 
     c1: np.ndarray
     c2: np.ndarray
@@ -184,6 +186,8 @@ class Contacts:
     status: np.ndarray
     w1: np.ndarray
     w2: np.ndarray
+    patch1: np.ndarray
+    patch2: np.ndarray
 
 
 def find_contacts(fields: SDFBatch, g1, g2, jaw_width: float, field_index=None,
@@ -205,14 +209,14 @@ def find_contacts(fields: SDFBatch, g1, g2, jaw_width: float, field_index=None,
         field_index = np.arange(b) if len(fields) == b else np.zeros(b, dtype=np.int64)
     field_index = np.broadcast_to(np.asarray(field_index, dtype=np.int64), (b,))
     out = Contacts(*(np.full((b, 2), np.nan) for _ in range(4)), np.empty(b, dtype=np.int8),
-                   np.full(b, np.nan), np.full(b, np.nan))
+                   np.full(b, np.nan), np.full(b, np.nan), *(np.full((b, plate_lines, 2), np.nan) for _ in range(2)))
     steps = max(2, int(math.ceil(np.max(np.linalg.norm(g2 - g1, axis=1), initial=0.0)
                                  / (MARCH_STEP_CELLS * fields.grid.cell))) + 1)
     chunk = max(1, _MAX_EVALUATIONS // (plate_lines * steps))
     for start in range(0, b, chunk):
         s = slice(start, min(b, start + chunk))
         part = _contacts_chunk(fields, g1[s], g2[s], jaw_width, field_index[s], plate_lines, steps)
-        for name in ("c1", "c2", "n1", "n2", "status", "w1", "w2"):
+        for name in ("c1", "c2", "n1", "n2", "status", "w1", "w2", "patch1", "patch2"):
             getattr(out, name)[s] = getattr(part, name)
     return out
 
@@ -282,13 +286,16 @@ def _contacts_chunk(fields: SDFBatch, g1, g2, jaw_width, fidx, plate_lines, step
     # Patches, from the bracketed crossings (one bilinear estimate for every line alike).
     depth = PATCH_DEPTH / safe[:, None]
     spacing = jaw_width / max(plate_lines - 1, 1)
-    widths = []
-    for touch in (t1 <= t1[rows, best1][:, None] + depth, t2 >= t2[rows, best2][:, None] - depth):
-        line_index = np.arange(plate_lines)
+    line_index = np.arange(plate_lines)
+    widths, patches = [], []
+    for t, touch in ((t1, t1 <= t1[rows, best1][:, None] + depth), (t2, t2 >= t2[rows, best2][:, None] - depth)):
+        touch &= (status == OK)[:, None]
         first = np.where(touch, line_index, plate_lines).min(axis=1)
         last = np.where(touch, line_index, -1).max(axis=1)
         widths.append(np.where(status == OK, (last - first) * spacing, np.nan))
-    return Contacts(point[:b], point[b:], normal[:b], normal[b:], status, *widths)
+        where = starts + np.where(touch, t, np.nan)[:, :, None] * d[:, None, :]
+        patches.append(where)
+    return Contacts(point[:b], point[b:], normal[:b], normal[b:], status, *widths, *patches)
 
 
 def _secant(f, ts, i_out, i_in):
@@ -420,6 +427,41 @@ def force_closure(c1, c2, n1, n2, friction) -> np.ndarray:
     in_cone1 = -np.einsum("ij,ij->i", m1, u) > cos_limit
     in_cone2 = np.einsum("ij,ij->i", m2, u) > cos_limit
     return (length > 0) & in_cone1 & in_cone2
+
+
+def plate_closure(contacts: Contacts, friction, com, torque_scale: float):
+    """Force closure of the plates' contact patches, and its Ferrari-Canny quality.
+
+    A plate pressed on a flat patch can push anywhere on it (the pressure over a rigid
+    contact is not fixed by statics), so the grasp is in force closure when some pair of
+    points, one on each patch, is. The pair judged is the one whose line lies deepest
+    inside both friction cones (the first contacts' normals; the largest of the smaller
+    cosine to each inward normal): the grasp is in force closure exactly when that pair
+    is (:func:`force_closure`), and the quality is that pair's Ferrari-Canny quality. The
+    patches' points are the first contacts and the other touching lines' crossings; for
+    point and curved contacts (one line per patch) this is the first contacts' force
+    closure and quality. friction: float or (B,); com: (2,) or (B, 2). Returns closure
+    (B,) and quality (B,), 0 out of closure."""
+    b = len(contacts.status)
+    friction = np.broadcast_to(np.asarray(friction, dtype=float), (b,))
+    com = np.broadcast_to(np.asarray(com, dtype=float), (b, 2))
+    patch1 = np.concatenate([contacts.c1[:, None], contacts.patch1], axis=1)  # (B, K + 1, 2)
+    patch2 = np.concatenate([contacts.c2[:, None], contacts.patch2], axis=1)
+    line = patch2[:, None, :, :] - patch1[:, :, None, :]  # (B, K + 1, K + 1, 2)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        line /= np.linalg.norm(line, axis=-1, keepdims=True)
+    depth = np.minimum(-np.einsum("bijk,bk->bij", line, contacts.n1), np.einsum("bijk,bk->bij", line, contacts.n2))
+    best = np.argmax(np.where(np.isfinite(depth), depth, -np.inf).reshape(b, -1), axis=1)
+    i, j = np.divmod(best, patch2.shape[1])
+    rows = np.arange(b)
+    p1, p2 = patch1[rows, i], patch2[rows, j]
+    closure = np.zeros(b, dtype=bool)
+    ok = contacts.status == OK
+    closure[ok] = force_closure(p1[ok], p2[ok], contacts.n1[ok], contacts.n2[ok], friction[ok])
+    quality = np.zeros(b)
+    quality[closure] = ferrari_canny(p1[closure], p2[closure], contacts.n1[closure], contacts.n2[closure],
+                                     friction[closure], com[closure], torque_scale)
+    return closure, quality
 
 
 def contact_wrenches(c1, c2, n1, n2, friction, com, torque_scale: float) -> np.ndarray:

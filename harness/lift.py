@@ -91,11 +91,14 @@ def hold_probability(demand, lever_1, lever_2) -> np.ndarray:
 @dataclass(frozen=True)
 class LiftVerdict:
     """Per draw: lifted or not (B,), the lift reason index into LIFT_REASONS (-1 when
-    lifted), and whether the torque turned the object (lifted or not)."""
+    lifted), whether the torque turned the object (lifted or not), and the chance of the
+    lift averaged over the levers instead of drawn (smooth; its mean over draws estimates
+    P_L with less variance than the verdicts' share)."""
 
     lifted: np.ndarray
     reason: np.ndarray
     pivots: np.ndarray
+    chance: np.ndarray
 
 
 def judge(c1, c2, w1, w2, area, com, reach, friction, pressure, settings: GraspSettings) -> LiftVerdict:
@@ -108,17 +111,17 @@ def judge(c1, c2, w1, w2, area, com, reach, friction, pressure, settings: GraspS
     placing each plate's lever in its admissible range.
     """
     weight = settings.density * settings.thickness * GRAVITY * np.asarray(area, dtype=float)
-    distance = line_distance(com, c1, c2)
-    demand = torque_demand(weight, distance, friction, settings)
+    demand = torque_demand(weight, line_distance(com, c1, c2), friction, settings)
     height = patch_height(settings)
-    levers = pressure[:, 0] * largest_lever(w1, height) + pressure[:, 1] * largest_lever(w2, height)
+    largest = largest_lever(w1, height), largest_lever(w2, height)
     slip = np.isnan(demand)
-    pivots = ~slip & (demand > levers)
+    pivots = ~slip & (demand > pressure[:, 0] * largest[0] + pressure[:, 1] * largest[1])
     hangs_clear = reach < settings.lift_height + axis_height(settings)
     reason = np.full(len(weight), -1, dtype=np.int8)
     reason[slip] = SLIP
     reason[pivots & ~hangs_clear] = TORQUE
-    return LiftVerdict(reason < 0, reason, pivots)
+    hold = hold_probability(demand, *largest)
+    return LiftVerdict(reason < 0, reason, pivots, np.where(slip, 0.0, np.where(hangs_clear, 1.0, hold)))
 
 
 def line_distance(point, c1, c2) -> np.ndarray:
@@ -151,3 +154,49 @@ def smooth_lift(distance, distance_sd, weight, friction, w1, w2, reach, reach_sc
     clear = ndtr((settings.lift_height + axis_height(settings) - reach) / reach_scale)
     slides = np.isnan(torque_demand(weight, 0.0, friction, settings))
     return np.where(slides, 0.0, hold + (1.0 - hold) * clear)
+
+
+@dataclass(frozen=True)
+class MassBelief:
+    """What a planner knows of the object's mass: the weight (N), the centre of mass's
+    mean (2,) and covariance (2, 2), and the convex hull (V, 2) of the shape it plans on
+    (the mean shape's largest region)."""
+
+    weight: float
+    com: np.ndarray
+    com_cov: np.ndarray
+    hull: np.ndarray
+
+    @classmethod
+    def of_mean_shape(cls, belief, settings: GraspSettings) -> "MassBelief":
+        """The mean shape's weight and centre of mass, taken as certain."""
+        regions = belief.mean_field.regions
+        weight = settings.density * settings.thickness * GRAVITY * float(regions.area[0])
+        return cls(weight, regions.center_of_mass[0], np.zeros((2, 2)), regions.hull[0])
+
+    @classmethod
+    def of_posterior(cls, belief, settings: GraspSettings, n: int, rng: np.random.Generator) -> "MassBelief":
+        """The weight and the centre of mass's mean and covariance over n posterior shape
+        samples (their largest regions, as the physics extrudes), with the mean shape's hull."""
+        from harness.grasp import SDFBatch
+
+        shapes = belief.sample(n, rng)
+        regions = SDFBatch(belief.grid, shapes.values, shapes.gradients).regions
+        found = regions.area > 0
+        com = regions.center_of_mass[found]
+        weight = settings.density * settings.thickness * GRAVITY * float(regions.area[found].mean())
+        cov = np.cov(com, rowvar=False) if len(com) > 2 else np.zeros((2, 2))
+        return cls(weight, com.mean(axis=0), cov, belief.mean_field.regions.hull[0])
+
+    def margin(self, c1, c2, w1, w2, friction, settings: GraspSettings, reach_scale: float) -> np.ndarray:
+        """The smooth lift probability (B,) of grasps with contacts c1, c2 (B, 2) and patch
+        widths w1, w2 (B,): :func:`smooth_lift` with the centre of mass's distance from
+        the contact line, its std across the line (from the covariance), and the hull's
+        reach beyond the line on the centre of mass's side."""
+        c1, c2 = np.asarray(c1, dtype=float), np.asarray(c2, dtype=float)
+        com = np.broadcast_to(self.com, c1.shape)
+        normal = side_normal(com, c1, c2)
+        distance_sd = np.sqrt(np.maximum(np.einsum("bi,ij,bj->b", normal, self.com_cov, normal), 0.0))
+        reach = (np.einsum("vk,bk->bv", self.hull, normal) - np.einsum("bk,bk->b", c1, normal)[:, None]).max(axis=1)
+        return smooth_lift(line_distance(com, c1, c2), distance_sd, self.weight, friction, w1, w2, reach,
+                           reach_scale, settings)

@@ -10,8 +10,7 @@ from functools import cached_property
 import numpy as np
 
 from harness.belief import Belief
-from harness.grasp import (DEGENERATE, MISSED, OK, TOO_WIDE, Grasp, SDFBatch, ferrari_canny, find_contacts,
-                           force_closure)
+from harness.grasp import DEGENERATE, MISSED, OK, TOO_WIDE, Grasp, SDFBatch, find_contacts, plate_closure
 from harness.lift import LIFT_REASONS, judge, side_normal
 from harness.settings import GraspSettings
 
@@ -107,13 +106,15 @@ class DrawOutcomes:
     """Per-draw results (G, n) for G grasps: force closure, lifted (force closure and the
     lift; None when the lift was not judged), failure reason index into FAILURE_REASONS
     (-1 for lifted, or for force closure without the lift), whether the weight turned
-    the object, and the Ferrari-Canny quality."""
+    the object, the Ferrari-Canny quality, and the lift's chance averaged over the
+    levers (0 out of force closure; None when the lift was not judged)."""
 
     closure: np.ndarray
     lifted: np.ndarray | None
     reason: np.ndarray
     pivots: np.ndarray
     ferrari_canny: np.ndarray
+    lift_chance: np.ndarray | None = None
 
     @cached_property
     def estimates(self) -> list[QualityEstimate]:
@@ -139,8 +140,8 @@ def evaluate_draws(grasps, draws: EvaluationDraws, settings: GraspSettings, lift
     than the gripper's opening is narrowed symmetrically to the opening (the gripper
     cannot open further). A draw fails, in this order, when a jaw starts inside the
     shape (too_wide), when no object lies between the jaws (missed), when a contact
-    normal is undefined (degenerate_normal), when the grasp is not in force closure
-    (friction_cone), and then, in force closure, when the weight slides the object out
+    normal is undefined (degenerate_normal), when the plates' contact patches are not in
+    force closure (friction_cone; harness.grasp.plate_closure), and then, in force closure, when the weight slides the object out
     (weight_slip) or turns it back onto the table (weight_torque) (harness.lift, with
     the shape sample's area and centre of mass and draw i's pressure deviates).
     ``lift=False`` skips the lift (P_F alone; P_L is then NaN).
@@ -152,13 +153,8 @@ def evaluate_draws(grasps, draws: EvaluationDraws, settings: GraspSettings, lift
     gamma = np.tile(settings.frictions(draws.friction), g)
     contacts = find_contacts(draws.shapes, g1, g2, settings.jaw_width, field_index=field)
     ok = contacts.status == OK
-    closure = np.zeros(g * n, dtype=bool)
-    quality = np.zeros(g * n)
-    closure[ok] = force_closure(contacts.c1[ok], contacts.c2[ok], contacts.n1[ok], contacts.n2[ok], gamma[ok])
-    # Ferrari-Canny is positive exactly in force closure (tested), so only those draws need it.
+    closure, quality = plate_closure(contacts, gamma, draws.shapes.center_of_mass[field], draws.torque_scale)
     held = closure
-    quality[held] = ferrari_canny(contacts.c1[held], contacts.c2[held], contacts.n1[held], contacts.n2[held],
-                                  gamma[held], draws.shapes.center_of_mass[field[held]], draws.torque_scale)
     reason = np.full(g * n, -1, dtype=np.int8)
     reason[~ok & (contacts.status == TOO_WIDE)] = FAILURE_REASONS.index("too_wide")
     reason[~ok & (contacts.status == MISSED)] = FAILURE_REASONS.index("missed")
@@ -166,6 +162,7 @@ def evaluate_draws(grasps, draws: EvaluationDraws, settings: GraspSettings, lift
     reason[ok & ~closure] = FAILURE_REASONS.index("friction_cone")
     lifted = np.zeros(g * n, dtype=bool)
     pivots = np.zeros(g * n, dtype=bool)
+    chance = np.zeros(g * n)
     if lift and held.any():
         regions = draws.shapes.regions
         f = field[held]
@@ -173,10 +170,10 @@ def evaluate_draws(grasps, draws: EvaluationDraws, settings: GraspSettings, lift
         reach = regions.extent(f, c1, side_normal(com, c1, c2))
         verdict = judge(c1, c2, contacts.w1[held], contacts.w2[held], regions.area[f], com, reach, gamma[held],
                         draws.pressure[f], settings)
-        lifted[held], pivots[held] = verdict.lifted, verdict.pivots
+        lifted[held], pivots[held], chance[held] = verdict.lifted, verdict.pivots, verdict.chance
         reason[np.flatnonzero(held)[~verdict.lifted]] = len(PLANAR_REASONS) + verdict.reason[~verdict.lifted]
     return DrawOutcomes(closure.reshape(g, n), lifted.reshape(g, n) if lift else None, reason.reshape(g, n),
-                        pivots.reshape(g, n), quality.reshape(g, n))
+                        pivots.reshape(g, n), quality.reshape(g, n), chance.reshape(g, n) if lift else None)
 
 
 def estimate_p_f(grasps, draws: EvaluationDraws, settings: GraspSettings, lift: bool = True) -> list[QualityEstimate]:

@@ -110,15 +110,34 @@ def _paired(trials: pd.DataFrame, a: str, b: str, shapes: str) -> pd.DataFrame:
 
 
 def comparison_pairs(config: dict) -> list[tuple[str, str]]:
-    """The planner comparisons a report shows: each planner against mean-shape, then every
-    gp-gpis-opt entry against every gp-p entry (labels, in the config's order)."""
+    """The planner comparisons a report shows (labels, in the config's order): each planner
+    against every mean-shape entry that optimises the same quality, every gp-gpis-opt
+    entry against every gp-p entry of the same quality, and each entry that optimises the
+    lift against the entry of the same planner and parameters that does not. A planner
+    without a ``quality`` parameter counts as force closure."""
     planners = expected(config)[1]
-    names = {p["label"]: p["name"] for p in config["planners"]}
-    pairs = []
+    entries = {p["label"]: p for p in config["planners"]}
+    names = {lab: entries[lab]["name"] for lab in planners}
+    quality = {lab: entries[lab]["params"].get("quality", "force_closure") for lab in planners}
+    pairs: list[tuple[str, str]] = []
+
+    def add(a, b):
+        if a != b and (a, b) not in pairs and (b, a) not in pairs:
+            pairs.append((a, b))
+
     for base in (lab for lab in planners if names[lab] == BASELINE):
-        pairs += [(lab, base) for lab in planners if lab != base]
+        for lab in planners:
+            if quality[lab] == quality[base]:
+                add(lab, base)
     for opt in (lab for lab in planners if names[lab] == "gp-gpis-opt"):
-        pairs += [(opt, gp) for gp in planners if names[gp] == "gp-p" and (opt, gp) not in pairs]
+        for gp in (lab for lab in planners if names[lab] == "gp-p" and quality[lab] == quality[opt]):
+            add(opt, gp)
+    for lab in (lab for lab in planners if quality[lab] == "lift"):
+        plain = {k: v for k, v in entries[lab]["params"].items() if k != "quality"}
+        for other in planners:
+            other_params = {k: v for k, v in entries[other]["params"].items() if k != "quality"}
+            if names[other] == names[lab] and quality[other] == "force_closure" and other_params == plain:
+                add(lab, other)
     return pairs
 
 
@@ -146,22 +165,25 @@ def row_groups(frame: pd.DataFrame, keys: list[str]) -> list[np.ndarray]:
 
 
 def comparisons(data: dict, seed: int = 0) -> pd.DataFrame:
-    """Each planner against mean-shape, and every gp-gpis-opt entry against every gp-p
-    entry: success difference (a - b) on the same trials, a paired bootstrap 95 % interval
-    (trials resampled in pairs within each cell, so the interval is conditional on the
-    plans), and McNemar's exact p on the discordant pairs."""
+    """The pairs of :func:`comparison_pairs`, on posterior samples, on the true shape and
+    pooled over both ('all'): success difference (a - b) on the same trials, a paired
+    bootstrap 95 % interval (trials resampled in pairs within each plan's trials of one
+    shape source, so the interval is conditional on the plans), and McNemar's exact p on
+    the discordant pairs."""
     config, trials = data["config"], data["trials"]
     scenes = expected(config)[0]
     rng = np.random.default_rng(np.random.SeedSequence([seed, 0x7EB0]))
     rows = []
     for a, b in comparison_pairs(config):
-        for shapes in ("posterior", "truth"):
-            m = _paired(trials, a, b, shapes)
+        by_source = {shapes: _paired(trials, a, b, shapes).assign(shapes=shapes) for shapes in ("posterior", "truth")}
+        by_source[ALL] = pd.concat(by_source.values(), ignore_index=True)
+        for shapes, m in by_source.items():
             for scene in scenes + [ALL]:
                 s = m if scene == ALL else m[m.scene == scene]
                 if s.empty:
                     continue
-                diff = paired_difference((s.a - s.b).to_numpy(), row_groups(s, ["scene", "realisation"]), rng)
+                groups = row_groups(s, ["shapes", "scene", "realisation"])
+                diff = paired_difference((s.a - s.b).to_numpy(), groups, rng)
                 n10, n01, p = mcnemar(s.a.to_numpy(), s.b.to_numpy())
                 rows.append({"scene": scene, "shapes": shapes, "planner": a, "versus": b, **diff,
                              "only_planner": n10, "only_versus": n01, "mcnemar_p": p})
@@ -312,15 +334,18 @@ def write_report(out_dir: Path, figures: bool = True) -> dict:
     bins.to_csv(out_dir / "reliability.csv", index=False)
     fails.to_csv(out_dir / "failures.csv", index=False)
     verdicts.to_csv(out_dir / "reasons.csv", index=False)
-    md = ["# " + data["config"]["name"], "", display_table(s).to_markdown(index=False), "",
-          "## Paired comparisons (success difference, posterior samples)", ""]
+    md = ["# " + data["config"]["name"], "", display_table(s).to_markdown(index=False), ""]
     if not comp.empty:
-        shown = comp[comp.shapes == "posterior"].copy()
+        shown = comp.copy()
         shown["difference [95% CI]"] = [f"{d:+.3f} [{lo:+.3f}, {hi:+.3f}]"
                                         for d, lo, hi in zip(shown.difference, shown.ci_low, shown.ci_high)]
         shown["McNemar p"] = shown.mcnemar_p.map(lambda p: f"{p:.3g}")
-        md.append(shown[["scene", "planner", "versus", "pairs", "difference [95% CI]", "McNemar p"]]
-                  .to_markdown(index=False))
+        columns = ["planner", "versus", "pairs", "difference [95% CI]", "McNemar p"]
+        md += ["## Paired comparisons over all scenes (success difference)", "",
+               shown[shown.scene == ALL][["shapes", *columns]].to_markdown(index=False), "",
+               "## Paired comparisons per scene (posterior samples)", "",
+               shown[(shown.shapes == "posterior") & (shown.scene != ALL)][["scene", *columns]]
+               .to_markdown(index=False)]
     md += ["", "## Calibration of analytic P_F and P_L against physical success", "",
            cal.to_markdown(index=False, floatfmt=".3f") if not cal.empty else "(no executed plans)", "",
            "## Trial outcomes", "", fails.to_markdown(index=False), "",

@@ -32,6 +32,16 @@ from harness.settings import GraspSettings, resolve
 
 #: What a Plan's status may say.
 STATUSES = ("ok", "budget", "no_surface", "no_candidate", "infeasible", "error")
+#: What the built-in planners may optimise (their ``quality`` parameter): the paper's
+#: planar force closure, or force closure and the lift (harness.lift).
+QUALITIES = ("force_closure", "lift")
+
+
+def check_quality(quality: str) -> str:
+    """``quality`` if it is one of QUALITIES; ValueError otherwise."""
+    if quality not in QUALITIES:
+        raise ValueError(f"quality must be one of {', '.join(QUALITIES)}, got {quality!r}")
+    return quality
 
 
 @dataclass(frozen=True)
@@ -58,7 +68,7 @@ class Plan:
     grasp: the chosen grasp, or None. status: one of STATUSES ("ok"; "budget" when the
     time budget cut the search short and the best grasp so far is returned;
     "no_surface"; "no_candidate"; "infeasible"; "error", set by the harness when plan
-    raised). estimate: the planner's own estimate of P_F, or None. iterations and
+    raised). estimate: the planner's own estimate of P_F (or P_L), or None. iterations and
     evaluations: the planner's units of work. seconds: time by phase. trace: tuples
     (seconds, evaluations, best value so far) for convergence plots. message: a note.
     """

@@ -1,7 +1,9 @@
 """GP-GPIS-OPT (Mahler et al., ICRA 2015): a grasp optimised by sequential convex
 programming for a smooth surrogate of P_F on the mean shape under approach noise and
 shape uncertainty, minus a penalty on shape uncertainty at the contacts, subject to
-antipodal constraints.
+antipodal constraints. With ``quality = "lift"`` the surrogate is of P_L instead: each
+sigma point's P_F term times the lift model's smooth probability, with the centre of
+mass's posterior mean and spread (harness.lift.MassBelief).
 
 Decision variables: the two jaw start points (in cells), not the contact points as in the
 paper. With jaw plates a grasp's contacts lie on the plate's edges as often as on its
@@ -21,10 +23,11 @@ import numpy as np
 from scipy.special import ndtr
 
 from harness.grasp import OK, Grasp, SDFBatch, find_contacts, interpolate
+from harness.lift import MassBelief
 from harness.quality import draw_evaluation, estimate_p_f
 from harness.scp import SCPSettings, minimize
 from planners import candidates as cand
-from planners.base import Plan, Planner, Problem, Stopwatch
+from planners.base import Plan, Planner, Problem, Stopwatch, check_quality
 
 #: Sigma points over approach noise: each jaw start offset across the axis by the
 #: 3-point Gauss-Hermite nodes 0, +-sqrt(3) sigma_g (weights 2/3, 1/6, 1/6), 9 in all.
@@ -36,15 +39,17 @@ _K = np.array([(a, b) for a in _NODES for b in _NODES])
 _W = np.array([wa * wb for wa in _NODE_W for wb in _NODE_W])
 #: The sigma point with no offset: the nominal grasp.
 _NOMINAL = int(np.flatnonzero((_K == 0).all(axis=1))[0])
+#: Posterior shape samples behind the centre of mass's mean and spread (quality "lift").
+COM_SAMPLES = 64
 
 
 class GPGPISOpt(Planner):
     name = "gp-gpis-opt"
-    description = "sequential convex programming on a smooth P_F surrogate minus an uncertainty penalty (OSQP)"
+    description = "sequential convex programming on a smooth P_F (or P_L) surrogate minus an uncertainty penalty (OSQP)"
 
     def __init__(self, initialisations: int = 10, screen: int = 100, nu: float = 1.0, temperature_deg: float = 5.0,
                  max_iterations: int = 20, finalists: int = 0, rerank_samples: int = 200,
-                 angular_noise_deg: float = 10.0):
+                 angular_noise_deg: float = 10.0, quality: str = "force_closure"):
         if min(initialisations, screen, max_iterations, rerank_samples) < 1 or finalists < 0:
             raise ValueError("initialisations, screen, max_iterations and rerank_samples must be >= 1, "
                              "finalists >= 0")
@@ -58,16 +63,19 @@ class GPGPISOpt(Planner):
         self.finalists = int(finalists)
         self.rerank_samples = int(rerank_samples)
         self.angular_noise_deg = float(angular_noise_deg)
+        self.quality = check_quality(quality)
 
     def plan(self, problem: Problem, rng: np.random.Generator) -> Plan:
         clock = Stopwatch(problem.time_budget_s)
         belief = problem.belief
         if belief.mean_shape.is_empty:
             return Plan.without_grasp("no_surface", "the posterior mean has no inside", seconds=clock.phases)
-        init_rng, rerank_rng = rng.spawn(2)
+        init_rng, rerank_rng, mass_rng = rng.spawn(3)
         grasps = cand.generate(belief, max(self.screen, self.initialisations), init_rng, problem.settings,
                                math.radians(self.angular_noise_deg))
-        objective = SurrogateObjective(problem, self.nu, math.radians(self.temperature_deg))
+        mass = (MassBelief.of_posterior(belief, problem.settings, COM_SAMPLES, mass_rng) if self.quality == "lift"
+                else None)
+        objective = SurrogateObjective(problem, self.nu, math.radians(self.temperature_deg), mass)
         c = (find_contacts(objective.mean, grasps[:, 0], grasps[:, 1], problem.settings.jaw_width)
              if len(grasps) else None)
         if c is None or not np.any(c.status == OK):
@@ -97,9 +105,10 @@ class GPGPISOpt(Planner):
         if order and self.finalists > 1:
             finalists = order[: self.finalists]
             draws = draw_evaluation(belief, self.rerank_samples, *rerank_rng.spawn(4))
-            est = estimate_p_f(jaws[finalists], draws, problem.settings)
-            pick = int(np.argmax([e.p_f for e in est]))
-            chosen, estimate = finalists[pick], est[pick].p_f
+            est = estimate_p_f(jaws[finalists], draws, problem.settings, lift=self.quality == "lift")
+            values = [e.p_l if self.quality == "lift" else e.p_f for e in est]
+            pick = int(np.argmax(values))
+            chosen, estimate = finalists[pick], values[pick]
             message = f"finalists re-ranked on {self.rerank_samples} draws"
             clock.lap("rerank")
         elif order:
@@ -140,14 +149,19 @@ class SurrogateObjective:
     Phi(m1 / s1) Phi(m2 / s2), where m_i = atan(friction) - (angle between the contact line
     and contact i's inward normal) and s_i^2 = temperature^2 + (the posterior std of that
     normal's angle at the nominal contact, from the gradient variance)^2. A sigma point
-    whose plates start inside, miss, or find no normal scores 0.
+    whose plates start inside, miss, or find no normal scores 0. With a MassBelief
+    (quality "lift") each sigma point's term is multiplied by the lift's smooth
+    probability at its contacts (MassBelief.margin: the centre of mass's posterior
+    distance from the contact line and its spread, the weight, the patches, the hang),
+    and the objective maximises that P~_L instead.
     Inequalities: both nominal contacts in their friction cones (radians); the width
     within the opening; each jaw start at least a clearance minus sigma_g from its
     contact (cells). Bounds keep the jaw starts in the grid.
     """
 
-    def __init__(self, problem: Problem, nu: float, temperature: float):
+    def __init__(self, problem: Problem, nu: float, temperature: float, mass: MassBelief | None = None):
         belief = problem.belief
+        self.mass = mass
         grid = belief.grid
         self.problem = problem
         self.settings = settings = problem.settings
@@ -181,7 +195,8 @@ class SurrogateObjective:
         return (width <= self.settings.opening) & (np.abs(jaws) < half).all(axis=(1, 2)) & np.isfinite(width)
 
     def _evaluate(self, x):
-        """Contacts of every sigma point: c1, c2, n1, n2 (R, 9, 2) and ok (R, 9)."""
+        """Contacts of every sigma point: c1, c2, n1, n2 (R, 9, 2), ok (R, 9) and the patch
+        widths w1, w2 (R, 9)."""
         jaws = self.jaw_starts(x)
         g1, g2 = jaws[:, 0], jaws[:, 1]
         d = g2 - g1
@@ -192,12 +207,12 @@ class SurrogateObjective:
         c = find_contacts(self.mean, s1, s2, self.settings.jaw_width, field_index=np.zeros(len(s1), dtype=np.int64))
         r = len(x)
         return (c.c1.reshape(r, -1, 2), c.c2.reshape(r, -1, 2), c.n1.reshape(r, -1, 2), c.n2.reshape(r, -1, 2),
-                (c.status == OK).reshape(r, -1))
+                (c.status == OK).reshape(r, -1), c.w1.reshape(r, -1), c.w2.reshape(r, -1))
 
     def _terms(self, x) -> dict:
         """The objective's and constraints' parts at rows x (see the class docstring)."""
         r = len(x)
-        c1, c2, n1, n2, ok = self._evaluate(x)
+        c1, c2, n1, n2, ok, w1, w2 = self._evaluate(x)
         line = c2 - c1
         line /= np.maximum(np.linalg.norm(line, axis=-1, keepdims=True), 1e-12)
         a1 = np.arccos(np.clip(-np.einsum("rsk,rsk->rs", n1, line), -1.0, 1.0))
@@ -215,8 +230,13 @@ class SurrogateObjective:
         reach = np.stack([np.linalg.norm(jaws[:, 0] - c1[:, _NOMINAL], axis=1),
                           np.linalg.norm(jaws[:, 1] - c2[:, _NOMINAL], axis=1)], axis=1)
         reach = np.where(hit[:, None], reach, self.gap)
+        if self.mass is not None:
+            lift = np.zeros(ok.shape)
+            lift[ok] = self.mass.margin(c1[ok], c2[ok], w1[ok], w2[ok], self.settings.friction, self.settings,
+                                        self.h)
+            hold = hold * lift
         return {
-            "p_f": np.where(ok, hold, 0.0) @ _W,
+            "quality": np.where(ok, hold, 0.0) @ _W,
             "uncertainty": self.nu * np.where(hit, var.sum(axis=0), 0.0),
             "pull": 1e-3 * (((reach - self.gap) / self.h) ** 2).sum(axis=1),
             # A nominal grasp that finds no contacts violates its cone constraints by a radian.
@@ -229,8 +249,8 @@ class SurrogateObjective:
         """f (R,), h (R, 0), g (R, n_ineq) for the SCP solver."""
         t = self._terms(x)
         g = np.concatenate([t["cone"], t["width"], t["clear"]], axis=1)
-        return t["uncertainty"] - t["p_f"] + t["pull"], np.zeros((len(x), 0)), g
+        return t["uncertainty"] - t["quality"] + t["pull"], np.zeros((len(x), 0)), g
 
     def surrogate(self, x):
-        """P~_F (R,)."""
-        return self._terms(x)["p_f"]
+        """P~_F, or P~_L with a MassBelief (R,)."""
+        return self._terms(x)["quality"]

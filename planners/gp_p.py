@@ -1,25 +1,28 @@
-"""GP-P: candidate grasps ranked by the Monte-Carlo probability of force closure over one
-pool of shape samples and approach-noise draws (the planner's own, not the evaluation's)."""
+"""GP-P: candidate grasps ranked by the Monte-Carlo probability of force closure (or, with
+``quality = "lift"``, of force closure and the lift) over one pool of shape samples and
+approach-noise draws (the planner's own, not the evaluation's)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from harness.quality import draw_evaluation, estimate_p_f
-from planners.base import Plan, Planner, Problem
+from harness.quality import draw_evaluation, estimate_p_f, evaluate_draws
+from planners.base import Plan, Planner, Problem, check_quality
 from planners.sampling import search
 
 
 class GPP(Planner):
     name = "gp-p"
-    description = "Monte-Carlo ranking: candidates ranked by P_F over a shared pool of shape samples"
+    description = "Monte-Carlo ranking: candidates ranked by P_F (or P_L) over a shared pool of shape samples"
 
-    def __init__(self, candidates: int = 100, samples: int = 1000, angular_noise_deg: float = 10.0):
+    def __init__(self, candidates: int = 100, samples: int = 1000, angular_noise_deg: float = 10.0,
+                 quality: str = "force_closure"):
         if candidates < 1 or samples < 1:
             raise ValueError("candidates and samples must be at least 1")
         self.candidates = int(candidates)
         self.samples = int(samples)
         self.angular_noise_deg = float(angular_noise_deg)
+        self.quality = check_quality(quality)
 
     def plan(self, problem: Problem, rng: np.random.Generator, record: list | None = None) -> Plan:
         """As Planner.plan; ``record`` (a list) receives (seconds, grasps, P_F) per chunk of
@@ -32,9 +35,13 @@ class GPP(Planner):
     def _setup(self, problem: Problem, rng: np.random.Generator):
         return problem, draw_evaluation(problem.belief, self.samples, *rng.spawn(4))
 
-    @staticmethod
-    def _score(grasps, state):
+    def _score(self, grasps, state):
         problem, draws = state
-        estimates = estimate_p_f(grasps, draws, problem.settings)
+        if self.quality == "lift":
+            # P_L with the levers averaged instead of drawn (less variance than the share of
+            # lifted draws); ties go to the higher mean Ferrari-Canny quality.
+            outcomes = evaluate_draws(grasps, draws, problem.settings)
+            return outcomes.lift_chance.mean(axis=1), outcomes.ferrari_canny.mean(axis=1)
+        estimates = estimate_p_f(grasps, draws, problem.settings, lift=False)
         # Ties in P_F (common near 0 and 1) go to the higher mean Ferrari-Canny quality.
         return np.array([e.p_f for e in estimates]), np.array([e.ferrari_canny_mean for e in estimates])

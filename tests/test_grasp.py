@@ -12,7 +12,7 @@ from scipy.optimize import linprog
 from harness.belief import build_belief
 from harness.geometry import Grid
 from harness.grasp import (DEGENERATE, MISSED, OK, PLATE_LINES, TOO_WIDE, Grasp, SDFBatch, contact_wrenches,
-                           ferrari_canny, find_contacts, force_closure)
+                           ferrari_canny, find_contacts, force_closure, plate_closure)
 from harness.scene import load_scene
 from harness.seeding import stream
 
@@ -325,3 +325,34 @@ def test_centre_of_mass_of_each_field_is_that_of_its_largest_region():
     # Fractional occupancy of cells: within 2 % of a cell (0.08 mm) for a 30 mm disk.
     assert np.abs(com[keep] - centres[keep]).max() < 0.02 * grid.cell
     assert np.isnan(com[7]).all()
+
+
+def test_plates_flat_on_a_face_are_in_force_closure_where_their_leading_edges_are_not():
+    """A grasp through the rectangle's centre 2 degrees off its long axis, friction 0.15
+    (cone 8.5 degrees): each plate lies within 0.35 mm of the short face over its 10 mm,
+    so the whole plate touches. The first contacts sit on opposite plate edges, a line
+    about 11.5 degrees off the normals (out of the cone); the patches hold points
+    directly across from each other, 2 degrees off (in the cone)."""
+    import math
+
+    from harness.grasp import plate_closure
+
+    scene = load_scene("rectangle")
+    field = SDFBatch(scene.grid, scene.true_sdf, scene.true_sdf_gradient)
+    angle = math.radians(2.0)
+    g1 = np.array([[-0.045 * math.cos(angle), -0.045 * math.sin(angle)]])
+    c = find_contacts(field, g1, -g1, 0.01)
+    assert c.w1[0] == pytest.approx(0.01) and c.w2[0] == pytest.approx(0.01)
+    line = (c.c2 - c.c1)[0]
+    off_normal = math.degrees(math.acos(abs(line[0]) / np.linalg.norm(line)))
+    assert off_normal > math.degrees(math.atan(0.15))
+    assert not force_closure(c.c1, c.c2, c.n1, c.n2, 0.15)[0]
+    closure, quality = plate_closure(c, 0.15, np.zeros(2), 0.03)
+    assert closure[0] and quality[0] > 0
+    # Point contacts (one line per patch) keep the first contacts' verdict and quality.
+    disk = load_scene("disk")
+    c = find_contacts(SDFBatch(disk.grid, disk.true_sdf, disk.true_sdf_gradient),
+                      [[-0.045, 0.01]], [[0.045, 0.012]], 0.0)
+    closure, quality = plate_closure(c, 0.3, np.zeros(2), 0.03)
+    assert closure[0] == force_closure(c.c1, c.c2, c.n1, c.n2, 0.3)[0]
+    assert quality[0] == pytest.approx(ferrari_canny(c.c1, c.c2, c.n1, c.n2, 0.3, np.zeros(2), 0.03)[0])

@@ -31,8 +31,8 @@ RANKED_DRAWS = 100
 @dataclass(frozen=True)
 class TrialSet:
     """Trials with, per trial, its scene, whether it is on the true shape, and the
-    analytic verdict of the same draw: force closure of the executed grasp (point
-    contacts, the scene's friction) on the same shape field."""
+    analytic verdict of the same draw: force closure of the executed grasp's plate
+    patches (the scene's friction) on the same shape field."""
 
     trials: list[Trial]
     scenes: list[str]
@@ -50,7 +50,7 @@ def library_trials(grasps_per_scene: int = 12, seed: int = 0, ranked: bool = Tru
     (what GP-P returns, and what the experiments mostly execute); otherwise the first
     candidates as drawn (good and bad alike, a harder set).
     """
-    from harness.grasp import OK, SDFBatch, find_contacts, force_closure
+    from harness.grasp import SDFBatch, find_contacts, plate_closure
     from harness.physics.bodies import field_polygon
     from harness.quality import draw_evaluation, estimate_p_f, executed_starts
     from planners.candidates import generate
@@ -81,8 +81,7 @@ def library_trials(grasps_per_scene: int = 12, seed: int = 0, ranked: bool = Tru
                 out.trials.extend(make_trials(settings, grasp, [polygon], deviates))
                 g1, g2 = executed_starts(grasp, deviates, settings)
                 contacts = find_contacts(fields, g1, g2, settings.jaw_width, field_index=np.array([field]))
-                closure = bool(contacts.status[0] == OK and force_closure(
-                    contacts.c1, contacts.c2, contacts.n1, contacts.n2, settings.friction)[0])
+                closure = bool(plate_closure(contacts, settings.friction, np.zeros(2), 1.0)[0][0])
                 out.scenes.append(name)
                 out.on_truth.append(on_truth)
                 out.force_closure.append(closure)

@@ -1,0 +1,129 @@
+"""The report's P_L columns on a synthetic ledger: pooled P_F and P_L in the summary,
+calibration per metric (Brier over trials and Spearman over plans, against a direct
+computation), the analytic verdicts against the physical outcomes, and the planner
+comparisons a config with lift variants gets."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from scipy import stats
+
+from harness.ledger import FILENAME, Ledger
+from harness.report import calibration, comparison_pairs, comparisons, load, reasons, summary
+
+SCENES = ("alpha", "beta")
+PLANNERS = ("mean-shape", "gp-p")
+POSTERIOR, TRUTH, DRAWS = 40, 10, 200
+
+
+def _config() -> dict:
+    return {"name": "synthetic", "source": "synthetic.toml", "seed": 0, "realisations": 3,
+            "scenes": [f"/nowhere/{s}.toml" for s in SCENES],
+            "planners": [{"label": p, "name": p, "params": {}} for p in PLANNERS],
+            "analytic_draws": DRAWS, "posterior_trials": POSTERIOR, "truth_trials": TRUTH, "time_budget_s": 10.0,
+            "settings": {}, "physics": {}, "batch_size": 16}
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    """Plans whose P_L sets their trials' success rate (P_F does not), and per-draw
+    verdicts that say 'lifted' exactly for the successful trials but for a known few."""
+    folder = tmp_path_factory.mktemp("report")
+    rng = np.random.default_rng(11)
+    plans, analytic, trials = [], [], []
+    for s in SCENES:
+        for r in range(3):
+            for p in PLANNERS:
+                p_l = float(rng.uniform(0.1, 0.95))
+                p_f = float(rng.uniform(0.9, 1.0))
+                success = rng.random(POSTERIOR) < p_l
+                verdicts = np.where(success, "lifted", "weight_torque")
+                verdicts[:2] = ["friction_cone", "lifted"]
+                plans.append({"scene": s, "realisation": r, "planner": p, "planner_name": p, "params": "{}",
+                              "status": "ok", "executed": 1, "message": "", "g1x": -0.03, "g1y": 0.0, "g2x": 0.03,
+                              "g2y": 0.0, "estimate": 0.5, "plan_time_s": 0.1, "iterations": 1, "evaluations": 1,
+                              "trace": "[]"})
+                analytic.append({"scene": s, "realisation": r, "planner": p, "draws": DRAWS, "p_f": p_f,
+                                 "ci_low": p_f - 0.01, "ci_high": min(1.0, p_f + 0.01), "ferrari_canny_mean": 0.1,
+                                 "failures": "{}", "p_l": round(p_l * DRAWS) / DRAWS, "p_l_ci_low": 0.0,
+                                 "p_l_ci_high": 1.0, "pivots": 0, "reasons": ",".join(verdicts)})
+                for i in range(POSTERIOR):
+                    trials.append({"scene": s, "realisation": r, "planner": p, "shapes": "posterior", "trial": i,
+                                   "outcome": "success" if success[i] else "slipped", "steps": 1,
+                                   "grip_width": None, "closing_turn": None, "rise": None, "pivot": None})
+                for i in range(TRUTH):
+                    trials.append({"scene": s, "realisation": r, "planner": p, "shapes": "truth", "trial": i,
+                                   "outcome": "success", "steps": 1, "grip_width": None, "closing_turn": None,
+                                   "rise": None, "pivot": None})
+    with Ledger(folder / FILENAME) as ledger:
+        number = ledger.start_run("h", "synthetic", _config(), {})
+        ledger.add("h", {"plans": plans, "analytic": analytic, "trials": trials})
+        ledger.end_run(number, "complete")
+    return load(folder)
+
+
+def test_the_summary_pools_p_l_over_the_plans_draws(run):
+    s = summary(run)
+    a = run["analytic"]
+    for planner in PLANNERS:
+        row = s[(s.scene == "all") & (s.planner == planner)].iloc[0]
+        mine = a[a.planner == planner]
+        assert row.p_l == pytest.approx((mine.p_l * DRAWS).sum() / (DRAWS * len(mine)), abs=1e-12)
+        assert row.p_l_ci_low < row.p_l < row.p_l_ci_high
+
+
+def test_calibration_gives_brier_and_spearman_per_metric_as_computed_directly(run):
+    table, bins = calibration(run)
+    assert set(table.metric) == {"p_f", "p_l"} and set(bins.metric) == {"p_f", "p_l"}
+    post = run["trials"][run["trials"].shapes == "posterior"]
+    joined = post.merge(run["analytic"], on=["scene", "realisation", "planner"])
+    won = (joined.outcome == "success").astype(float)
+    rate = joined.assign(s=won).groupby(["scene", "realisation", "planner"]).agg(s=("s", "mean"), p_f=("p_f", "first"),
+                                                                                 p_l=("p_l", "first"))
+    for metric in ("p_f", "p_l"):
+        row = table[(table.metric == metric) & (table.planner == "all")].iloc[0]
+        assert row.brier == pytest.approx(((joined[metric] - won) ** 2).mean(), abs=1e-12)
+        assert row.spearman == pytest.approx(stats.spearmanr(rate[metric], rate.s).statistic, abs=1e-12)
+    p_l, p_f = (table[(table.metric == m) & (table.planner == "all")].iloc[0] for m in ("p_l", "p_f"))
+    assert p_l.spearman > 0.8 and p_l.brier < p_f.brier  # the synthetic success follows P_L, not P_F
+
+
+def test_the_verdicts_of_the_draws_meet_their_trials_outcomes(run):
+    table = reasons(run)
+    overall = table[table.planner == "all"].drop(columns="planner").set_index("analytic")
+    n_plans = len(SCENES) * 3 * len(PLANNERS)
+    assert overall.loc["friction_cone"].sum() == n_plans  # draw 0 of every plan
+    # Draws 2.. say 'lifted' exactly for the successes; draw 1 says 'lifted' whatever happened.
+    post = run["trials"][run["trials"].shapes == "posterior"]
+    assert overall.loc["lifted", "success"] == (post[post.trial >= 1].outcome == "success").sum()
+    assert overall.loc["weight_torque", "slipped"] == (post[post.trial >= 2].outcome == "slipped").sum()
+    assert overall.to_numpy().sum() == len(post)
+    assert list(table.planner.unique()) == ["all", *PLANNERS]
+
+
+def test_lift_variants_are_compared_with_their_own_baseline_and_with_the_paper_quality():
+    planners = [("mean-shape", "mean-shape", {}), ("gp-p", "gp-p", {}), ("gp-gpis-opt", "gp-gpis-opt", {}),
+                ("mean-shape-lift", "mean-shape", {"quality": "lift"}), ("gp-p-lift", "gp-p", {"quality": "lift"}),
+                ("gp-gpis-opt-lift", "gp-gpis-opt", {"quality": "lift"})]
+    config = {"scenes": [], "realisations": 1,
+              "planners": [{"label": lab, "name": name, "params": params} for lab, name, params in planners]}
+    assert comparison_pairs(config) == [
+        ("gp-p", "mean-shape"), ("gp-gpis-opt", "mean-shape"), ("gp-p-lift", "mean-shape-lift"),
+        ("gp-gpis-opt-lift", "mean-shape-lift"), ("gp-gpis-opt", "gp-p"), ("gp-gpis-opt-lift", "gp-p-lift"),
+        ("mean-shape-lift", "mean-shape"), ("gp-p-lift", "gp-p"), ("gp-gpis-opt-lift", "gp-gpis-opt")]
+
+
+def test_comparisons_pool_both_shape_sources(run):
+    comp = comparisons(run)
+    pooled = comp[(comp.scene == "all") & (comp.shapes == "all")].iloc[0]
+    post = comp[(comp.scene == "all") & (comp.shapes == "posterior")].iloc[0]
+    truth = comp[(comp.scene == "all") & (comp.shapes == "truth")].iloc[0]
+    assert pooled.pairs == post.pairs + truth.pairs
+    assert pooled.difference == pytest.approx((post.difference * post.pairs + truth.difference * truth.pairs)
+                                              / pooled.pairs, abs=1e-12)
+    assert pooled.ci_low <= pooled.difference <= pooled.ci_high
