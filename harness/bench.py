@@ -187,15 +187,18 @@ def _planner_row(scene_name: str, size: int) -> dict:
 
 
 def planning(sizes=PLANNING_SIZES, scene: str = SAMPLING_SCENE) -> dict:
-    """Seconds per P_F estimate (1000 paired draws), per SCP initialisation and per GP-P
-    candidate over grid sizes, with their growth."""
-    from harness.scene import load_scene
+    """Seconds per P_F and per P_L estimate (1000 paired draws), per SCP initialisation and
+    per GP-P candidate over grid sizes, with their growth; the convergence study; and
+    gp-gpis-opt against gp-p, both planning for the lift, over the library."""
+    from harness.scene import library_names, load_scene
 
     for m in sizes:
         load_scene(scene, overrides=_sampling_overrides(m))
         load_scene(PLANNER_SCENE, overrides=_sampling_overrides(m, PLANNER_SCENE))
     rows = [_in_fresh_process(_p_f_row, scene, m) for m in sizes]
     planners = [_in_fresh_process(_planner_row, PLANNER_SCENE, m) for m in sizes]
+    lift_rows = [_in_fresh_process(_quality_scene, name, LIFT_PLANNERS, "p_l", LIFT_SEEDS)
+                 for name in library_names()]
     convergence = [_in_fresh_process(_convergence, seed) for seed in range(CONVERGENCE_SEEDS)]
     ms = np.array([r["M"] for r in rows], dtype=float)
 
@@ -207,10 +210,22 @@ def planning(sizes=PLANNING_SIZES, scene: str = SAMPLING_SCENE) -> dict:
     scp = {str(r["M"]): r["gp-gpis-opt"] for r in planners}
     gpp = {str(r["M"]): r["gp-p"] for r in planners}
     return {"scene": scene, "draws": SAMPLES, "grasp": "through the centre at 0.3 rad, width 0.09 m",
-            "rows": rows, "p_f_s_at_50": at50, "p_l_over_p_f_at_50": ratio50, "p_f_growth_exponent": growth([r["p_f_s"] for r in rows]),
+            "rows": rows, "p_f_s_at_50": at50, "p_l_over_p_f_at_50": ratio50,
+            "p_f_growth_exponent": growth([r["p_f_s"] for r in rows]),
             "planner_scene": PLANNER_SCENE, "scp_s_per_init": scp, "gpp_s_per_candidate": gpp,
             "scp_over_gpp": {m: scp[m] / gpp[m] for m in scp},
-            "scp_growth_exponent": growth(list(scp.values())), **_convergence_summary(convergence)}
+            "scp_growth_exponent": growth(list(scp.values())), **_convergence_summary(convergence),
+            "lift_planners": _lift_summary(lift_rows)}
+
+
+def _lift_summary(rows: list[dict]) -> dict:
+    """gp-gpis-opt with the lift against gp-p with the lift over the library: mean P_L
+    and mean plan time of each, and their ratios."""
+    gpp, opt = (label for label, _, _ in LIFT_PLANNERS)
+    p_l = {label: float(np.mean([np.mean(r["p_l"][label]) for r in rows])) for label in (opt, gpp)}
+    seconds = {label: float(np.mean([np.mean(r["plan_s"][label]) for r in rows])) for label in (opt, gpp)}
+    return {"seeds": LIFT_SEEDS, "rows": rows, "mean_p_l": p_l, "mean_plan_s": seconds,
+            "p_l_ratio": p_l[opt] / p_l[gpp], "time_ratio": seconds[opt] / seconds[gpp]}
 
 
 #: Scene of the planner timings (tilted, partly hidden: the optimiser has work to do).
@@ -278,14 +293,19 @@ def _convergence_summary(runs: list) -> dict:
 
 QUALITY_SEEDS = 5
 QUALITY_PLANNERS = ("mean-shape", "gp-p", "gp-gpis-opt")
+#: The lift variants compared in ``bench planning`` (label, registry name, parameters).
+LIFT_PLANNERS = (("gp-p-lift", "gp-p", {"quality": "lift"}), ("gp-gpis-opt-lift", "gp-gpis-opt", {"quality": "lift"}))
+LIFT_SEEDS = 3
 #: A scene has heavy uncertainty when at least this fraction of its mean surface has a
 #: posterior std above half a cell (seed 0's belief).
 HEAVY_FRACTION = 0.10
 
 
-def _quality_scene(name: str) -> dict:
-    """Analytic P_F (1000 evaluation draws, the scene's sigma_g and friction) of each
-    built-in planner's grasp on one scene, for QUALITY_SEEDS independent sensor readings."""
+def _quality_scene(name: str, variants=tuple((p, p, {}) for p in QUALITY_PLANNERS), metric: str = "p_f",
+                   seeds: int = QUALITY_SEEDS) -> dict:
+    """Analytic P_F, or P_L (``metric``; 1000 evaluation draws, the scene's settings), and
+    plan time of each planner variant's grasp (label, registry name, parameters) on one
+    scene, for ``seeds`` independent sensor readings."""
     from harness.belief import build_belief
     from harness.quality import default_streams, draw_evaluation, estimate_p_f
     from harness.scene import load_scene
@@ -294,19 +314,20 @@ def _quality_scene(name: str) -> dict:
     from planners.registry import make_planner
 
     scene = load_scene(name)
-    out = {"scene": name, "p_f": {p: [] for p in QUALITY_PLANNERS}, "plan_s": {p: [] for p in QUALITY_PLANNERS}}
-    for seed in range(QUALITY_SEEDS):
+    out = {"scene": name, metric: {v[0]: [] for v in variants}, "plan_s": {v[0]: [] for v in variants}}
+    for seed in range(seeds):
         belief = build_belief(scene, stream(seed, name, 0, "sensor")).prepare()
         if seed == 0:
             out["uncertain_fraction"] = float(np.mean(belief.surface_std() > 0.5 * scene.grid.cell))
         problem = Problem.for_belief(belief)
         draws = draw_evaluation(belief, SAMPLES, *default_streams(seed, name))
-        for pname in QUALITY_PLANNERS:
+        for label, pname, params in variants:
+            planner = make_planner(pname, params)
             t0 = time.perf_counter()
-            plan = make_planner(pname).plan(problem, stream(seed, name, 0, "planner", pname))
-            out["plan_s"][pname].append(time.perf_counter() - t0)
-            p_f = estimate_p_f(plan.grasp, draws, problem.settings)[0].p_f if plan.grasp is not None else 0.0
-            out["p_f"][pname].append(p_f)
+            plan = planner.plan(problem, stream(seed, name, 0, "planner", label))
+            out["plan_s"][label].append(time.perf_counter() - t0)
+            value = getattr(estimate_p_f(plan.grasp, draws, problem.settings)[0], metric) if plan.grasp else 0.0
+            out[metric][label].append(value)
     out["heavy"] = out["uncertain_fraction"] >= HEAVY_FRACTION
     return out
 
@@ -434,6 +455,12 @@ def format_results(results: dict) -> str:
                          f"{np.mean(t['gp-p']):.3f}, gp-gpis-opt {np.nanmean(t['gp-gpis-opt']):.3f}; speed-up "
                          f"{res['speedup_to_95pct'] if res['speedup_to_95pct'] is None else round(res['speedup_to_95pct'], 1)}")
             lines.append("final P_F: " + ", ".join(f"{k} {v:.3f}" for k, v in res["final_p_f"].items()))
+            lift = res["lift_planners"]
+            lines.append(f"lift planners over the library ({lift['seeds']} seeds, P_L on 1000 evaluation draws): "
+                         + ", ".join(f"{k} P_L {v:.3f} in {lift['mean_plan_s'][k]:.3f} s"
+                                     for k, v in lift["mean_p_l"].items())
+                         + f"; gp-gpis-opt-lift / gp-p-lift: P_L {lift['p_l_ratio']:.3f}, "
+                           f"time {lift['time_ratio']:.3f}")
         if name == "sampling":
             lines.append(f"sampling: {res['samples']} grid samples (values + gradients), scene '{res['scene']}'")
             lines.append(f"{'M':>5} {'fit s':>8} {'fast s':>8} {'exact s':>9} {'peak MB':>9} {'D':>6} {'r':>4}  method")

@@ -218,7 +218,7 @@ def calibration_figure(bins):
     ax.set_aspect("equal")
     ax.set_xlabel("analytic estimate of the plan")
     ax.set_ylabel("physical success on posterior samples")
-    ax.legend(fontsize=8, loc="upper left")
+    ax.legend(fontsize=8, loc="lower right")
     ax.set_title("Calibration (numbers: plans per bin)", fontsize=10)
     return fig
 

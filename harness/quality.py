@@ -141,9 +141,10 @@ def evaluate_draws(grasps, draws: EvaluationDraws, settings: GraspSettings, lift
     cannot open further). A draw fails, in this order, when a jaw starts inside the
     shape (too_wide), when no object lies between the jaws (missed), when a contact
     normal is undefined (degenerate_normal), when the plates' contact patches are not in
-    force closure (friction_cone; harness.grasp.plate_closure), and then, in force closure, when the weight slides the object out
-    (weight_slip) or turns it back onto the table (weight_torque) (harness.lift, with
-    the shape sample's area and centre of mass and draw i's pressure deviates).
+    force closure (friction_cone; harness.grasp.plate_closure), and then, in force
+    closure, when the weight slides the object out (weight_slip) or turns it back onto
+    the table (weight_torque) (harness.lift, with the shape sample's area and centre of
+    mass and draw i's pressure deviates).
     ``lift=False`` skips the lift (P_F alone; P_L is then NaN).
     """
     starts = as_starts(grasps)

@@ -275,7 +275,8 @@ _keys = st.sampled_from(["seed", "scenes", "realisations", "name", "evaluation.a
                          "evaluation.posterior_trials", "evaluation.truth_trials", "evaluation.sigma_g",
                          "evaluation.friction", "evaluation.time_budget_s", "physics.time_step",
                          "physics.solver_iterations", "physics.batch_size", "physics.cone_friction",
-                         "physics.table_hull", "gripper.opening", "gripper.force", "gripper.sigma_g", "evaluation.load_factor",
+                         "physics.table_hull", "gripper.opening", "gripper.force", "gripper.sigma_g",
+                         "evaluation.load_factor",
                          "planners.name", "planners.params.candidates", "bogus"])
 
 
