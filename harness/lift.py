@@ -56,6 +56,12 @@ def axis_height(settings: GraspSettings) -> float:
     return PLATE_CLEARANCE + 0.5 * patch_height(settings)
 
 
+def weight_of(area, settings: GraspSettings) -> np.ndarray:
+    """The weight (N) of a prism of this cross-section area (m^2), the settings' thickness
+    and density."""
+    return settings.density * settings.thickness * GRAVITY * np.asarray(area, dtype=float)
+
+
 def largest_lever(width, height: float) -> np.ndarray:
     """The largest admissible mean lever of friction over a width x height patch: its
     half-diagonal (all pressure at two opposite corners)."""
@@ -110,7 +116,7 @@ def judge(c1, c2, w1, w2, area, com, reach, friction, pressure, settings: GraspS
     friction (B,): the draw's coefficient; pressure (B, 2): uniform deviates in [0, 1)
     placing each plate's lever in its admissible range.
     """
-    weight = settings.density * settings.thickness * GRAVITY * np.asarray(area, dtype=float)
+    weight = weight_of(area, settings)
     demand = torque_demand(weight, line_distance(com, c1, c2), friction, settings)
     height = patch_height(settings)
     largest = largest_lever(w1, height), largest_lever(w2, height)
@@ -171,8 +177,8 @@ class MassBelief:
     def of_mean_shape(cls, belief, settings: GraspSettings) -> "MassBelief":
         """The mean shape's weight and centre of mass, taken as certain."""
         regions = belief.mean_field.regions
-        weight = settings.density * settings.thickness * GRAVITY * float(regions.area[0])
-        return cls(weight, regions.center_of_mass[0], np.zeros((2, 2)), regions.hull[0])
+        return cls(float(weight_of(regions.area[0], settings)), regions.center_of_mass[0], np.zeros((2, 2)),
+                   regions.hull[0])
 
     @classmethod
     def of_posterior(cls, belief, settings: GraspSettings, n: int, rng: np.random.Generator) -> "MassBelief":
@@ -184,9 +190,9 @@ class MassBelief:
         regions = SDFBatch(belief.grid, shapes.values, shapes.gradients).regions
         found = regions.area > 0
         com = regions.center_of_mass[found]
-        weight = settings.density * settings.thickness * GRAVITY * float(regions.area[found].mean())
         cov = np.cov(com, rowvar=False) if len(com) > 2 else np.zeros((2, 2))
-        return cls(weight, com.mean(axis=0), cov, belief.mean_field.regions.hull[0])
+        return cls(float(weight_of(regions.area[found].mean(), settings)), com.mean(axis=0), cov,
+                   belief.mean_field.regions.hull[0])
 
     def margin(self, c1, c2, w1, w2, friction, settings: GraspSettings, reach_scale: float) -> np.ndarray:
         """The smooth lift probability (B,) of grasps with contacts c1, c2 (B, 2) and patch

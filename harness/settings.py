@@ -6,7 +6,7 @@ line, and the physics protocol."""
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from typing import Mapping
 
 import numpy as np
@@ -69,9 +69,6 @@ class GraspSettings:
         """Friction per draw from standard-normal deviates: max(0, friction + spread * deviate).
         The analytic quality and the physics trials both take theirs from here."""
         return np.maximum(0.0, self.friction + self.friction_spread * np.asarray(deviates, dtype=float))
-
-    def as_dict(self) -> dict:
-        return {f.name: getattr(self, f.name) for f in fields(self)}
 
 
 def override_problem(name: str, value) -> str | None:

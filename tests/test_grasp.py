@@ -333,10 +333,6 @@ def test_plates_flat_on_a_face_are_in_force_closure_where_their_leading_edges_ar
     so the whole plate touches. The first contacts sit on opposite plate edges, a line
     about 11.5 degrees off the normals (out of the cone); the patches hold points
     directly across from each other, 2 degrees off (in the cone)."""
-    import math
-
-    from harness.grasp import plate_closure
-
     scene = load_scene("rectangle")
     field = SDFBatch(scene.grid, scene.true_sdf, scene.true_sdf_gradient)
     angle = math.radians(2.0)

@@ -5,11 +5,7 @@ comparisons a config with lift variants gets."""
 
 from __future__ import annotations
 
-import json
-from pathlib import Path
-
 import numpy as np
-import pandas as pd
 import pytest
 from scipy import stats
 
