@@ -196,7 +196,8 @@ def _simulate(args) -> int:
 
 
 def _eval(args) -> int:
-    from harness.experiment import load_config, run_experiment
+    from harness.config import load_config
+    from harness.experiment import run_experiment
 
     config = load_config(args.config)
     out = Path(args.out) if args.out else Path("results") / config.name

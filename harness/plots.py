@@ -8,7 +8,6 @@ matplotlib.use("Agg")
 
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
-import pandas as pd  # noqa: E402
 from matplotlib.colors import LogNorm  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 from shapely.geometry import box  # noqa: E402
@@ -228,8 +227,6 @@ def convergence_figure(bench: dict):
     best grasp so far against its planning time (steps), and of gp-gpis-opt's answer for
     runs with 1, 2, 3, 5 and 10 initialisations against their time (points); one line per
     seed."""
-    from harness.bench import CONVERGENCE_SCENE
-
     fig, ax = plt.subplots(figsize=(6.0, 4.2), constrained_layout=True)
     for k, run in enumerate(bench["convergence"]):
         gpp = np.asarray(run.get("gp-p", []), dtype=float)
@@ -243,7 +240,7 @@ def convergence_figure(bench: dict):
     ax.set_xlabel("planning time (s)")
     ax.set_ylabel("analytic P_F of the grasp (1000 draws)")
     ax.legend(fontsize=8, loc="lower right")
-    ax.set_title(f"Convergence on the {CONVERGENCE_SCENE} (bench planning; one line per seed)", fontsize=10)
+    ax.set_title(f"Convergence on the {bench.get('scene', 'plane')} (bench planning; one line per seed)", fontsize=10)
     return fig
 
 
@@ -265,53 +262,3 @@ def runtime_figure(bench: dict):
     ax.legend(fontsize=8)
     ax.set_title("Runtime against grid size (bench planning)", fontsize=10)
     return fig
-
-
-def report_figures(out_dir, data, summary, bins, fails) -> list:
-    """Write the report's PNGs into ``out_dir/figures``; returns their paths."""
-    from pathlib import Path
-
-    from harness.belief import build_belief
-    from harness.experiment import ExperimentConfig, scene_of, settings_of
-    from harness.seeding import stream
-
-    folder = Path(out_dir) / "figures"
-    folder.mkdir(exist_ok=True)
-    written = []
-
-    def save(fig, name):
-        path = folder / name
-        fig.savefig(path, dpi=110)
-        plt.close(fig)
-        written.append(path)
-
-    per_scene = summary[summary.scene != "all"]
-    save(success_figure(per_scene), "success.png")
-    if not fails.empty:
-        save(failures_figure(fails), "failures.png")
-    save(calibration_figure(bins), "calibration.png")
-    bench_file = Path(out_dir) / "bench-planning.json"
-    if bench_file.is_file():  # written by: gpis-harness bench planning --json > DIR/bench-planning.json
-        import json
-
-        bench = json.loads(bench_file.read_text())
-        if bench.get("convergence"):
-            save(convergence_figure(bench), "convergence.png")
-        save(runtime_figure(bench), "runtime.png")
-    config = ExperimentConfig.from_dict(data["config"])
-    plans = data["plans"]
-    for path in config.scenes:
-        scene = scene_of(config, path)
-        belief = build_belief(scene, stream(config.seed, scene.name, 0, "sensor"))
-        rows = plans[(plans.scene == scene.name) & (plans.realisation == 0)].set_index("planner")
-        grasps = {}
-        for entry in config.planners:
-            row = rows.loc[entry.label] if entry.label in rows.index else None
-            ok = row is not None and pd.notna(row.g1x)  # a plan without a grasp reads as NaN or None
-            grasps[entry.label] = ((row.g1x, row.g1y), (row.g2x, row.g2y)) if ok else None
-        fig = grasps_figure(belief, grasps, stream(config.seed, scene.name, 0, "blur"),
-                            settings_of(config, path).jaw_width,
-                            title=f"{scene.name}, realisation 0: GPIS-Blur and the planners' grasps\n"
-                                  "blue dashed: true shape; bars: jaw plates at their start points")
-        save(fig, f"grasps-{scene.name}.png")
-    return written

@@ -364,7 +364,55 @@ def write_report(out_dir: Path, figures: bool = True) -> dict:
                                 for r in runs.itertuples()]}
     (out_dir / "manifest.json").write_text(json.dumps(manifest, indent=2, default=str) + "\n")
     if figures:
-        from harness import plots
-
-        plots.report_figures(out_dir, data, s, bins, fails)
+        _figures(out_dir, data, s, bins, fails)
     return {"summary": s, "comparisons": comp, "calibration": cal}
+
+
+def _figures(out_dir, data, summary, bins, fails) -> list:
+    """Write the report's PNGs into ``out_dir/figures``; returns their paths."""
+    import matplotlib.pyplot as plt
+
+    from harness import plots
+    from harness.belief import build_belief
+    from harness.config import ExperimentConfig
+    from harness.seeding import stream
+    from harness.tasks import scene_of, settings_of
+
+    folder = Path(out_dir) / "figures"
+    folder.mkdir(exist_ok=True)
+    written = []
+
+    def save(fig, name):
+        path = folder / name
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+        written.append(path)
+
+    per_scene = summary[summary.scene != "all"]
+    save(plots.success_figure(per_scene), "success.png")
+    if not fails.empty:
+        save(plots.failures_figure(fails), "failures.png")
+    save(plots.calibration_figure(bins), "calibration.png")
+    bench_file = Path(out_dir) / "bench-planning.json"
+    if bench_file.is_file():  # written by: gpis-harness bench planning --json > DIR/bench-planning.json
+        bench = json.loads(bench_file.read_text())
+        if bench.get("convergence"):
+            save(plots.convergence_figure(bench), "convergence.png")
+        save(plots.runtime_figure(bench), "runtime.png")
+    config = ExperimentConfig.from_dict(data["config"])
+    plans = data["plans"]
+    for path in config.scenes:
+        scene = scene_of(config, path)
+        belief = build_belief(scene, stream(config.seed, scene.name, 0, "sensor"))
+        rows = plans[(plans.scene == scene.name) & (plans.realisation == 0)].set_index("planner")
+        grasps = {}
+        for entry in config.planners:
+            row = rows.loc[entry.label] if entry.label in rows.index else None
+            ok = row is not None and pd.notna(row.g1x)  # a plan without a grasp reads as NaN or None
+            grasps[entry.label] = ((row.g1x, row.g1y), (row.g2x, row.g2y)) if ok else None
+        fig = plots.grasps_figure(belief, grasps, stream(config.seed, scene.name, 0, "blur"),
+                                  settings_of(config, path).jaw_width,
+                                  title=f"{scene.name}, realisation 0: GPIS-Blur and the planners' grasps\n"
+                                        "blue dashed: true shape; bars: jaw plates at their start points")
+        save(fig, f"grasps-{scene.name}.png")
+    return written

@@ -20,7 +20,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from harness.cli import main
-from harness.experiment import load_config
+from harness.config import load_config
 from harness.physics.trial import Protocol
 from harness.report import SUMMARY_COLUMNS
 
@@ -334,7 +334,7 @@ def test_a_cell_plans_with_one_blas_thread_and_the_same_results(tmp_path, monkey
     from threadpoolctl import threadpool_info
 
     import harness.belief
-    from harness.experiment import _cell, run_cell
+    from harness.tasks import _cell, run_cell
 
     def blas_threads():
         return {i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"}

@@ -171,7 +171,7 @@ def test_the_contact_manifold_shortcut_of_the_lost_check_changes_no_result(monke
     scene, held and slipped trials among them) every result is the same bit for bit as with
     the query at every check, while the query runs far less often."""
     from harness.physics import trial as trial_module
-    from harness.physics.study import library_trials
+    from harness.bench.physics_study import library_trials
 
     trials = library_trials(grasps_per_scene=2, ranked=False).trials
     queries = []

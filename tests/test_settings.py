@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from harness.cli import main
-from harness.experiment import load_config, settings_of
+from harness.config import load_config
+from harness.tasks import settings_of
 from harness.physics.simulate import make_trials, truth_polygon
 from harness.physics.trial import Protocol
 from harness.scene import load_scene

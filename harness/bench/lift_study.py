@@ -183,7 +183,7 @@ def manifold_levers(grasps_per_scene: int = 6, seed: int = 0) -> dict:
     import pybullet as pb
 
     from harness.lift import PLATE_CLEARANCE
-    from harness.physics.study import library_trials
+    from harness.bench.physics_study import library_trials
     from harness.physics.trial import _Slot, approach_blocked
 
     trial_set = library_trials(grasps_per_scene, seed)

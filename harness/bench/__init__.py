@@ -286,7 +286,7 @@ def _convergence_summary(runs: list) -> dict:
         t_opt.append(next((t for t, _, p in run["gp-gpis-opt"] if p >= target), np.nan))
     final = {"gp-p": float(np.mean([r["gp-p"][-1][2] for r in runs])),
              "gp-gpis-opt": float(np.mean([r["gp-gpis-opt"][-1][2] for r in runs]))}
-    return {"convergence": runs, "seconds_to_95pct": {"gp-p": t_gpp, "gp-gpis-opt": t_opt},
+    return {"scene": CONVERGENCE_SCENE, "convergence": runs, "seconds_to_95pct": {"gp-p": t_gpp, "gp-gpis-opt": t_opt},
             "speedup_to_95pct": float(np.mean(t_gpp) / np.mean(t_opt)) if np.all(np.isfinite(t_opt)) else None,
             "final_p_f": final}
 
@@ -354,7 +354,7 @@ def physics(grasps_per_scene: int = PHYSICS_GRASPS_PER_SCENE, seed: int = 0) -> 
     """Trials per second of the batched runner and of a naive one (a new world per trial,
     no early stop) on the same trials, and the outcome agreement with a 4x finer step."""
     from harness.physics.simulate import outcome_counts
-    from harness.physics.study import agreement, confusion, library_trials, run_batched, run_naive
+    from harness.bench.physics_study import agreement, confusion, library_trials, run_batched, run_naive
     from harness.physics.trial import Protocol
 
     trials = library_trials(grasps_per_scene, seed).trials
@@ -376,8 +376,8 @@ def physics(grasps_per_scene: int = PHYSICS_GRASPS_PER_SCENE, seed: int = 0) -> 
 def lift(trials: int = 16, seed: int = 0) -> dict:
     """The lift model against the physics: the bar sweeps (where P_L and simulated success
     fall through 0.5) and the friction levers of Bullet's contact manifolds on the
-    library trial set (harness.physics.lift_study)."""
-    from harness.physics.lift_study import manifold_levers, validate
+    library trial set (harness.bench.lift_study)."""
+    from harness.bench.lift_study import manifold_levers, validate
 
     return {**validate(trials=trials, seed=seed), "manifold_levers": manifold_levers(seed=seed)}
 

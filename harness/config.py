@@ -1,0 +1,204 @@
+"""Experiment configs: a TOML file -> a validated ExperimentConfig (docs/experiments.md).
+
+Everything is checked before any work starts: each field's type and range, each
+planner's name and parameters (the planner is constructed once), and every scene file
+(loaded once). A bad config raises InputError naming the file and the field.
+"""
+
+from __future__ import annotations
+
+import fnmatch
+import hashlib
+import json
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+
+from harness.errors import InputError
+from harness.scene import LIBRARY, library_names, load_scene, resolve
+from harness.toml_table import Table, read_toml
+
+#: Protocol fields a config may override: whether zero is allowed (else strictly positive).
+_PROTOCOL_KEYS = {"time_step": False, "lift_height": False, "lift_time": False, "hold_time": True,
+                  "shake_time": True, "shake_frequency": False, "shake_amplitude": True, "shake_turn": True,
+                  "table_friction": True}
+#: Grasp settings (harness.settings) an experiment may override, by the table that holds them.
+_SETTING_TABLES = {"evaluation": ("sigma_g", "friction", "friction_spread", "load_factor"),
+                   "gripper": ("opening", "jaw_width", "sigma_g", "force", "closing_speed", "plate_height")}
+
+
+@dataclass(frozen=True)
+class PlannerEntry:
+    """One planner of an experiment: its label in the tables, registry name, parameters."""
+
+    label: str
+    name: str
+    params: dict
+
+
+@dataclass(frozen=True)
+class ExperimentConfig:
+    """A validated experiment config (see docs/experiments.md)."""
+
+    name: str
+    source: str
+    seed: int
+    scenes: tuple[str, ...]            # scene files, resolved
+    realisations: int
+    planners: tuple[PlannerEntry, ...]
+    analytic_draws: int
+    posterior_trials: int
+    truth_trials: int
+    time_budget_s: float
+    settings: dict = field(default_factory=dict)  # overrides of every scene's grasp settings
+    physics: dict = field(default_factory=dict)   # overrides of the trial protocol
+    batch_size: int = 16
+
+    def content(self) -> dict:
+        """What determines the results: the settings and the scene files' text."""
+        d = asdict(self)
+        d.pop("source")
+        d.pop("name")
+        d["scenes"] = {Path(p).stem: hashlib.sha256(Path(p).read_bytes()).hexdigest() for p in self.scenes}
+        return d
+
+    @property
+    def hash(self) -> str:
+        text = json.dumps(self.content(), sort_keys=True, default=str)
+        return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "ExperimentConfig":
+        """The inverse of as_dict (the ledger keeps the config as JSON). Configs written
+        before the settings were one field (sigma_g, friction, friction_spread and gripper
+        side by side) read as their overrides."""
+        d = dict(d)
+        legacy = {k: d.pop(k) for k in ("sigma_g", "friction", "friction_spread") if k in d}
+        settings = {**(d.pop("gripper", None) or {}), **{k: v for k, v in legacy.items() if v is not None},
+                    **d.pop("settings", {})}
+        return cls(**{**d, "settings": settings, "scenes": tuple(d["scenes"]),
+                      "planners": tuple(PlannerEntry(**p) for p in d["planners"])})
+
+    def protocol(self):
+        from harness.physics.trial import Protocol
+
+        return replace(Protocol(), **self.physics)
+
+    def cells(self) -> list[tuple[str, int]]:
+        return [(path, r) for path in self.scenes for r in range(self.realisations)]
+
+
+def load_config(path: str | Path) -> ExperimentConfig:
+    """Read and validate an experiment config; InputError (file, field, reason) on bad input."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(str(path), None, "no such experiment config")
+    return parse_config(read_toml(path), source=str(path), base_dir=path.parent, default_name=path.stem)
+
+
+def parse_config(data: dict, source: str, base_dir: Path, default_name: str = "experiment") -> ExperimentConfig:
+    from planners.registry import make_planner
+
+    root = Table(data, "", source)
+    name = root.string("name", default_name)
+    if not name or any(c in name for c in "/\\") or name.startswith("."):
+        raise root.error("name", f"'{name}' cannot name a results folder")
+    seed = root.integer("seed", 0, lo=0, hi=2**63 - 1)
+    scenes = _scene_files(root, base_dir)
+    realisations = root.integer("realisations", 3, lo=1, hi=1000)
+
+    ev = root.table("evaluation", required=False)
+    analytic = ev.integer("analytic_draws", 1000, lo=1, hi=1_000_000)
+    posterior = ev.integer("posterior_trials", 100, lo=0, hi=100_000)
+    truth = ev.integer("truth_trials", 50, lo=0, hi=100_000)
+    budget = ev.number("time_budget_s", 60.0, lo=0.0, hi=86_400.0, lo_open=True)
+    settings = _setting_overrides({"evaluation": ev, "gripper": root.table("gripper", required=False)})
+
+    phys = root.table("physics", required=False)
+    protocol = {key: phys.number(key, None, lo=0.0, lo_open=not zero_ok)
+                for key, zero_ok in _PROTOCOL_KEYS.items() if key in phys.data}
+    if "solver_iterations" in phys.data:
+        protocol["solver_iterations"] = phys.integer("solver_iterations", None, lo=1, hi=10_000)
+    if "time_step" in protocol and protocol["time_step"] > 0.01:
+        raise phys.error("time_step", f"{protocol['time_step']} s is too coarse (at most 0.01 s)")
+    for key in ("cone_friction", "table_hull"):
+        if key in phys.data:
+            protocol[key] = phys.boolean(key)
+    batch = phys.integer("batch_size", 16, lo=1, hi=64)
+    phys.finish()
+
+    entries = []
+    for t in root.tables("planners", min_count=1):
+        pname = t.string("name")
+        label = t.string("label", pname)
+        params_t = t.table("params", required=False)
+        params = dict(params_t.data)
+        params_t.used.update(params)
+        t.finish()
+        try:
+            make_planner(pname, params, source=source)
+        except InputError as exc:
+            raise InputError(source, f"{t.where}.{'params.' + exc.field if exc.field else 'name'}",
+                             exc.message) from None
+        if not label or any(c in label for c in "/\\\n"):
+            raise t.error("label", f"'{label}' is not a usable label")
+        if label in {e.label for e in entries}:
+            raise t.error("label", f"'{label}' is used twice (give each planner entry its own label)")
+        entries.append(PlannerEntry(label, pname, params))
+    root.finish()
+
+    config = ExperimentConfig(name, source, seed, tuple(scenes), realisations, tuple(entries), analytic,
+                              posterior, truth, budget, settings, protocol, batch)
+    for path in scenes:  # every scene must load, before any work starts
+        load_scene(path)
+    return config
+
+
+def _setting_overrides(tables: dict) -> dict:
+    """The grasp settings a config overrides, from [evaluation] and [gripper]; a setting
+    given in both is an error (which one would win is not obvious)."""
+    from harness.settings import BOUNDS
+
+    found: dict = {}
+    for table_name, keys in _SETTING_TABLES.items():
+        t = tables[table_name]
+        for key in keys:
+            if key not in t.data:
+                continue
+            lo, hi, lo_open = BOUNDS[key]
+            value = t.number(key, None, lo=lo, hi=hi, lo_open=lo_open)
+            if key in found:
+                raise t.error(key, f"is also set in [{found[key][0]}]: set each grasp setting once")
+            found[key] = (table_name, value)
+        t.finish()
+    return {key: value for key, (_, value) in found.items()}
+
+
+def _scene_files(root: Table, base_dir: Path) -> list[str]:
+    entries = root.list("scenes", ["*"])
+    if not entries:
+        raise root.error("scenes", "needs at least one scene")
+    files: list[str] = []
+    for k, entry in enumerate(entries):
+        if not isinstance(entry, str) or not entry:
+            raise root.error(f"scenes[{k}]", f"expected a scene name, glob or path, got {entry!r}")
+        looks_like_path = entry.endswith(".toml") or "/" in entry
+        if any(c in entry for c in "*?["):
+            matches = (sorted(str(p) for p in base_dir.glob(entry)) if looks_like_path
+                       else [str(LIBRARY / f"{n}.toml") for n in library_names() if fnmatch.fnmatch(n, entry)])
+            if not matches:
+                raise root.error(f"scenes[{k}]", f"'{entry}' matches no scene")
+        else:
+            target = str(base_dir / entry) if looks_like_path and not Path(entry).is_absolute() else entry
+            try:
+                matches = [str(resolve(target))]
+            except InputError as exc:
+                raise root.error(f"scenes[{k}]", exc.message) from None
+        files.extend(m for m in matches if m not in files)
+    stems = [Path(f).stem for f in files]
+    twice = sorted({s for s in stems if stems.count(s) > 1})
+    if twice:
+        raise root.error("scenes", f"two scene files are both called '{twice[0]}'")
+    return files
