@@ -198,35 +198,45 @@ def _simulate(args) -> int:
 def _eval(args) -> int:
     from harness.config import load_config
     from harness.experiment import run_experiment
+    from harness.outputs import command_line, folder_lock, output_folder, storage
 
     config = load_config(args.config)
-    out = Path(args.out) if args.out else Path("results") / config.name
-    if out.exists() and not out.is_dir():
-        raise InputError("--out", None, f"{out} exists and is not a folder")
+    out = output_folder(Path(args.out) if args.out else Path("results") / config.name)
 
     def log(line: str) -> None:
         print(line, file=sys.stderr, flush=True)
 
-    stats = run_experiment(config, out, workers=args.workers, scheduler=args.scheduler, fresh=args.fresh, log=log)
-    if stats.interrupted:
-        log(f"interrupted after {stats.seconds:.0f} s; {stats.plans} plans and {stats.trials} trials were "
-            f"recorded in {out}; run the same command again to resume")
-        return 130
-    log(f"{stats.plans} plans and {stats.trials} trials in {stats.seconds:.0f} s")
-    if not args.no_report:
-        _print_report(out, figures=True)
+    with folder_lock(out, command_line()):
+        with storage(out, "cannot record the run"):
+            stats = run_experiment(config, out, workers=args.workers, scheduler=args.scheduler, fresh=args.fresh,
+                                   log=log)
+        if stats.interrupted:
+            log(f"interrupted after {stats.seconds:.0f} s; {stats.plans} plans and {stats.trials} trials were "
+                f"recorded in {out}; run the same command again to resume")
+            return 130
+        log(f"{stats.plans} plans and {stats.trials} trials in {stats.seconds:.0f} s")
+        if not args.no_report:
+            _print_report(out, figures=True)
     return 1 if stats.errors else 0
 
 
 def _report(args) -> int:
-    _print_report(Path(args.dir), figures=not args.no_figures)
+    from harness.outputs import command_line, folder_lock
+
+    out = Path(args.dir)
+    if not out.is_dir():
+        raise InputError(str(out), None, "no such results folder")
+    with folder_lock(out, command_line()):
+        _print_report(out, figures=not args.no_figures)
     return 0
 
 
 def _print_report(out: Path, figures: bool) -> None:
+    from harness.outputs import storage
     from harness.report import display_table, write_report
 
-    tables = write_report(out, figures=figures)
+    with storage(out, "cannot write the report"):
+        tables = write_report(out, figures=figures)
     print(display_table(tables["summary"]).to_markdown(index=False))
     print(f"\ntables and figures in {out}", file=sys.stderr)
 
@@ -297,7 +307,11 @@ def _plan(args) -> int:
            "p_l_ci_low": None, "p_l_ci_high": None,
            "sigma_g": settings.sigma_g, "friction": settings.friction, "params": planner.get_params(),
            "message": plan.message}
-    if plan.grasp is not None:
+    rejected = plan.grasp.problem(scene.grid, settings.opening) if plan.grasp is not None else None
+    if rejected:  # as eval records it: the grasp is not executed, nor judged
+        out.update(status="invalid", message=f"grasp rejected: {rejected}",
+                   grasp={"g1": list(map(float, plan.grasp.g1)), "g2": list(map(float, plan.grasp.g2))})
+    elif plan.grasp is not None:
         # The same evaluation draws for every planner at this seed (common random numbers).
         draws = draw_evaluation(belief, 1000, *default_streams(args.seed, scene.name))
         est = estimate_p_f(plan.grasp, draws, settings)[0]
@@ -307,16 +321,16 @@ def _plan(args) -> int:
     if args.json:
         print(json.dumps(out))
     else:
-        print(f"{scene.name} / {planner.name}: {plan.status} in {plan_time:.3f} s "
+        print(f"{scene.name} / {planner.name}: {out['status']} in {plan_time:.3f} s "
               f"({plan.iterations} iterations, {plan.evaluations} evaluations)")
-        if plan.grasp is not None:
+        if plan.grasp is not None and not rejected:
             g1, g2 = plan.grasp.g1, plan.grasp.g2
             print(f"grasp g1 = ({g1[0]:.4f}, {g1[1]:.4f}) m, g2 = ({g2[0]:.4f}, {g2[1]:.4f}) m; "
                   f"P_F = {out['p_f']:.3f} (95% CI {out['ci_low']:.3f} to {out['ci_high']:.3f}), "
                   f"P_L = {out['p_l']:.3f} (95% CI {out['p_l_ci_low']:.3f} to {out['p_l_ci_high']:.3f}); "
                   f"planner's estimate {plan.estimate if plan.estimate is None else round(plan.estimate, 3)}")
-        if plan.message:
-            print(plan.message)
+        if out["message"]:
+            print(out["message"])
     return 0
 
 

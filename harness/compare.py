@@ -74,10 +74,10 @@ def config_differences(a: dict, b: dict) -> dict:
     source."""
     out = {}
     for name in sorted(set(a) | set(b)):
-        if name in IGNORED_FIELDS or name in ("scenes", "planners") or a.get(name) == b.get(name):
+        if name in IGNORED_FIELDS or name in ("scenes", "scene_names", "planners") or a.get(name) == b.get(name):
             continue
         out[name] = [a.get(name), b.get(name)]
-    sa, sb = ({Path(p).stem for p in c["scenes"]} for c in (a, b))
+    sa, sb = (set(expected(c)[0]) for c in (a, b))
     if sa != sb:
         out["scenes"] = [sorted(sa - sb), sorted(sb - sa)]
     pa, pb = ({p["label"]: p for p in c["planners"]} for c in (a, b))

@@ -52,13 +52,19 @@ class ExperimentConfig:
     settings: dict = field(default_factory=dict)  # overrides of every scene's grasp settings
     physics: dict = field(default_factory=dict)   # overrides of the trial protocol
     batch_size: int = 16
+    scene_names: tuple[str, ...] = ()  # each scene file's `name`: the key of its plans and trials
+
+    def __post_init__(self):
+        if len(self.scene_names) != len(self.scenes):  # configs stored before names were kept
+            object.__setattr__(self, "scene_names", stored_scene_names(asdict(self)))
 
     def content(self) -> dict:
         """What determines the results: the settings and the scene files' text."""
         d = asdict(self)
-        d.pop("source")
-        d.pop("name")
-        d["scenes"] = {Path(p).stem: hashlib.sha256(Path(p).read_bytes()).hexdigest() for p in self.scenes}
+        for key in ("source", "name", "scene_names"):
+            d.pop(key)
+        d["scenes"] = {name: hashlib.sha256(Path(p).read_bytes()).hexdigest()
+                       for name, p in zip(self.scene_names, self.scenes, strict=True)}
         return d
 
     @property
@@ -79,6 +85,7 @@ class ExperimentConfig:
         settings = {**(d.pop("gripper", None) or {}), **{k: v for k, v in legacy.items() if v is not None},
                     **d.pop("settings", {})}
         return cls(**{**d, "settings": settings, "scenes": tuple(d["scenes"]),
+                      "scene_names": tuple(d.get("scene_names", ())),
                       "planners": tuple(PlannerEntry(**p) for p in d["planners"])})
 
     def protocol(self):
@@ -86,8 +93,27 @@ class ExperimentConfig:
 
         return replace(Protocol(), **self.physics)
 
-    def cells(self) -> list[tuple[str, int]]:
-        return [(path, r) for path in self.scenes for r in range(self.realisations)]
+    def cells(self) -> list[tuple[str, str, int]]:
+        """(scene file, scene name, realisation) of every cell, in order."""
+        return [(path, name, r) for path, name in zip(self.scenes, self.scene_names, strict=True)
+                for r in range(self.realisations)]
+
+
+def stored_scene_names(config: dict) -> tuple[str, ...]:
+    """The scene names of a config as the ledger stores it (ExperimentConfig.as_dict).
+    Configs stored before the names were kept name each scene by its file's `name` if
+    it still loads, else by its file name."""
+    names = tuple(config.get("scene_names") or ())
+    if len(names) == len(config["scenes"]):
+        return names
+    return tuple(_file_scene_name(path) for path in config["scenes"])
+
+
+def _file_scene_name(path: str) -> str:
+    try:
+        return load_scene(path).name
+    except InputError:
+        return Path(path).stem
 
 
 def load_config(path: str | Path) -> ExperimentConfig:
@@ -149,11 +175,14 @@ def parse_config(data: dict, source: str, base_dir: Path, default_name: str = "e
         entries.append(PlannerEntry(label, pname, params))
     root.finish()
 
-    config = ExperimentConfig(name, source, seed, tuple(scenes), realisations, tuple(entries), analytic,
-                              posterior, truth, budget, settings, protocol, batch)
-    for path in scenes:  # every scene must load, before any work starts
-        load_scene(path)
-    return config
+    names = [load_scene(path).name for path in scenes]  # every scene must load, before any work starts
+    for k, scene_name in enumerate(names):
+        if scene_name in names[:k]:
+            first = scenes[names.index(scene_name)]
+            raise root.error("scenes", f"{first} and {scenes[k]} are both named '{scene_name}' "
+                                       "(plans and trials are stored by scene name: give each its own)")
+    return ExperimentConfig(name, source, seed, tuple(scenes), realisations, tuple(entries), analytic,
+                            posterior, truth, budget, settings, protocol, batch, tuple(names))
 
 
 def _setting_overrides(tables: dict) -> dict:
@@ -177,7 +206,7 @@ def _setting_overrides(tables: dict) -> dict:
 
 
 def _scene_files(root: Table, base_dir: Path) -> list[str]:
-    entries = root.list("scenes", ["*"])
+    entries = root.list("scenes")  # required: a config without it must not quietly run the whole library
     if not entries:
         raise root.error("scenes", "needs at least one scene")
     files: list[str] = []
@@ -197,8 +226,4 @@ def _scene_files(root: Table, base_dir: Path) -> list[str]:
             except InputError as exc:
                 raise root.error(f"scenes[{k}]", exc.message) from None
         files.extend(m for m in matches if m not in files)
-    stems = [Path(f).stem for f in files]
-    twice = sorted({s for s in stems if stems.count(s) > 1})
-    if twice:
-        raise root.error("scenes", f"two scene files are both called '{twice[0]}'")
     return files

@@ -5,6 +5,7 @@ the main loop, the only writer of the ledger.
 
 from __future__ import annotations
 
+import sqlite3
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -25,7 +26,8 @@ class RunStats:
 
 def run_experiment(config: ExperimentConfig, out_dir: Path, workers: int | None = None,
                    scheduler: str | None = None, fresh: bool = False, log=print) -> RunStats:
-    """Run (or resume) an experiment into ``out_dir``'s ledger."""
+    """Run (or resume) an experiment into ``out_dir``'s ledger. The caller holds the
+    folder's lock (harness.outputs.folder_lock)."""
     from harness.executor import make_executor
     from harness.ledger import FILENAME, Ledger
 
@@ -33,72 +35,97 @@ def run_experiment(config: ExperimentConfig, out_dir: Path, workers: int | None 
     stats = RunStats()
     start = time.perf_counter()
     key = config.hash
-    with Ledger(out_dir / FILENAME) as ledger:
-        if fresh:
-            ledger.forget(key)
-        run = ledger.start_run(key, config.name, config.as_dict(), environment())
-        todo = []  # cells with work left: (path, realisation, labels to plan, plans already done, trials done)
-        n_plans = n_trials = done_plans = done_trials = 0
-        per_plan = config.posterior_trials + config.truth_trials
-        for path, r in config.cells():
-            name = Path(path).stem
-            plans = ledger.plan_rows(key, name, r)
-            trials = ledger.done_trials(key, name, r)
-            labels = tuple(e.label for e in config.planners if e.label not in plans)
-            n_plans += len(config.planners)
-            n_trials += len(config.planners) * per_plan
-            done_plans += len(config.planners) - len(labels)
-            done_trials += len(trials)
-            if labels or len(trials) < len(config.planners) * per_plan:
-                todo.append((path, r, labels, plans, trials))
-        executor = make_executor(workers, scheduler)
-        log(f"{config.name}: {len(config.scenes)} scenes x {config.realisations} realisations x "
-            f"{len(config.planners)} planners, {per_plan} trials per plan; config {key}; {executor.description}"
-            + (f"; resuming with {done_plans} plans and {done_trials} trials done" if done_plans or done_trials
-               else ""))
-        bars = [_Progress("plans", n_plans, done_plans, 0, start, log),
-                _Progress("trials", n_trials, done_trials, 1, start, log)]
-        status = "interrupted"
-        try:
-            for path, r, labels, _, _ in todo:
-                executor.submit(run_cell, config, path, r, labels, tag=("cell", path, r))
-            known = {(path, r): (plans, trials) for path, r, _, plans, trials in todo}
-            while executor.pending:
-                tag, future = executor.next_done()
+    executor = make_executor(workers, scheduler)  # before the run is recorded: a failed connection leaves no trace
+    status = "interrupted"
+    try:
+        with Ledger(out_dir / FILENAME) as ledger:
+            if fresh:
+                ledger.forget(key)
+            run = ledger.start_run(key, config.name, config.as_dict(), environment())
+            try:
+                todo, counts = _work_left(ledger, config)
+                n_plans, n_trials, done_plans, done_trials = counts
+                per_plan = config.posterior_trials + config.truth_trials
+                log(f"{config.name}: {len(config.scenes)} scenes x {config.realisations} realisations x "
+                    f"{len(config.planners)} planners, {per_plan} trials per plan; config {key}; "
+                    f"{executor.description}"
+                    + (f"; resuming with {done_plans} plans and {done_trials} trials done"
+                       if done_plans or done_trials else ""))
+                bars = [_Progress("plans", n_plans, done_plans, 0, start, log),
+                        _Progress("trials", n_trials, done_trials, 1, start, log)]
                 try:
-                    result = future.result()
-                except Exception as exc:  # noqa: BLE001 - a task's failure is logged, the run goes on
-                    stats.errors.append(f"{tag[0]} {tag[1:]}: {type(exc).__name__}: {exc}")
-                    continue
-                if tag[0] == "cell":
-                    _, path, r = tag
-                    plans, done = known[(path, r)]
-                    ledger.add(key, {"plans": result.plans, "analytic": result.analytic})
-                    stats.plans += len(result.plans)
-                    bars[0].update(len(result.plans))
-                    for row in list(plans.values()) + result.plans:
-                        batches, rows = batches_of(config, path, result, row, done)
-                        if rows:
-                            ledger.add(key, {"trials": rows})
-                            bars[1].update(len(rows))
-                        for batch in batches:
-                            executor.submit(run_batch, config, batch, tag=("batch", len(batch.indices)))
-                else:
-                    ledger.add(key, {"trials": result})
-                    stats.trials += len(result)
-                    bars[1].update(len(result))
-            status = "complete" if not stats.errors else "errors"
-        except KeyboardInterrupt:
-            stats.interrupted = True
-        finally:
-            for bar in bars:
-                bar.close()
-            executor.close(cancel=status == "interrupted")
-            ledger.end_run(run, status)
+                    _drive(config, ledger, executor, todo, stats, bars)
+                    status = "complete" if not stats.errors else "errors"
+                except KeyboardInterrupt:
+                    stats.interrupted = True
+                finally:
+                    for bar in bars:
+                        bar.close()
+            finally:
+                try:
+                    ledger.end_run(run, status)
+                except sqlite3.Error:
+                    if status != "interrupted":
+                        raise  # the run finished but its end cannot be recorded: say so
+                    # else the error that stopped the run (a full disk, say) is the one reported
+    finally:
+        executor.close(cancel=status == "interrupted")
     stats.seconds = time.perf_counter() - start
     for error in stats.errors:
         log(f"task failed: {error}")
     return stats
+
+
+def _work_left(ledger, config: ExperimentConfig) -> tuple[list, tuple[int, int, int, int]]:
+    """Cells with work left, as (path, realisation, labels to plan, plans already done,
+    trials done), and the counts (plans, trials, plans done, trials done)."""
+    key = config.hash
+    todo = []
+    n_plans = n_trials = done_plans = done_trials = 0
+    per_plan = config.posterior_trials + config.truth_trials
+    for path, name, r in config.cells():
+        plans = ledger.plan_rows(key, name, r)
+        trials = ledger.done_trials(key, name, r)
+        labels = tuple(e.label for e in config.planners if e.label not in plans)
+        n_plans += len(config.planners)
+        n_trials += len(config.planners) * per_plan
+        done_plans += len(config.planners) - len(labels)
+        done_trials += len(trials)
+        if labels or len(trials) < len(config.planners) * per_plan:
+            todo.append((path, r, labels, plans, trials))
+    return todo, (n_plans, n_trials, done_plans, done_trials)
+
+
+def _drive(config: ExperimentConfig, ledger, executor, todo: list, stats: RunStats, bars: list) -> None:
+    """Submit the cells, then each plan's batches as its cell returns; record every result."""
+    key = config.hash
+    for path, r, labels, _, _ in todo:
+        executor.submit(run_cell, config, path, r, labels, tag=("cell", path, r))
+    known = {(path, r): (plans, trials) for path, r, _, plans, trials in todo}
+    while executor.pending:
+        tag, future = executor.next_done()
+        try:
+            result = future.result()
+        except Exception as exc:  # noqa: BLE001 - a task's failure is logged, the run goes on
+            stats.errors.append(f"{tag[0]} {tag[1:]}: {type(exc).__name__}: {exc}")
+            continue
+        if tag[0] == "cell":
+            _, path, r = tag
+            plans, done = known[(path, r)]
+            ledger.add(key, {"plans": result.plans, "analytic": result.analytic})
+            stats.plans += len(result.plans)
+            bars[0].update(len(result.plans))
+            for row in list(plans.values()) + result.plans:
+                batches, rows = batches_of(config, path, result, row, done)
+                if rows:
+                    ledger.add(key, {"trials": rows})
+                    bars[1].update(len(rows))
+                for batch in batches:
+                    executor.submit(run_batch, config, batch, tag=("batch", len(batch.indices)))
+        else:
+            ledger.add(key, {"trials": result})
+            stats.trials += len(result)
+            bars[1].update(len(result))
 
 
 class _Progress:

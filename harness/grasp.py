@@ -35,6 +35,11 @@ MIN_GRADIENT = 1e-3
 #: :class:`Contacts`). Below the plate lines' spacing (2.5 mm on a 10 mm plate) it only
 #: separates a flat face from a curved one.
 PATCH_DEPTH = 0.0005
+#: A grasp may be this much wider than the gripper's opening (m) and still be executed
+#: (narrowed to the opening): a width computed from two points carries rounding of
+#: about 1e-17 m, far below anything the gripper resolves. One tolerance for `plan`,
+#: `eval`, `simulate`, `quality` and the conformance kit (Grasp.problem).
+WIDTH_TOLERANCE = 1e-9
 #: Directions in which a region's extreme cells are kept (Regions.hull).
 HULL_DIRECTIONS = 64
 #: Work arrays of the march hold at most this many field evaluations at once.
@@ -89,8 +94,8 @@ class Grasp:
                 return f"jaw start {name} = ({g[0]:.4g}, {g[1]:.4g}) m is outside the grid [-{half:g}, {half:g}]^2 m"
         if self.width == 0.0:
             return "g1 and g2 coincide"
-        if self.width > opening:
-            return f"width {self.width:.4g} m exceeds the gripper opening {opening:.4g} m"
+        if self.width > opening + WIDTH_TOLERANCE:
+            return f"width {self.width:.6g} m exceeds the gripper opening {opening:.6g} m"
         return None
 
 

@@ -78,6 +78,8 @@ class Ledger:
         self.path = Path(path)
         if not create and not self.path.is_file():
             raise InputError(str(self.path), None, "no ledger here (run eval first)")
+        if self.path.is_symlink():  # the folder's own file, never a link planted to write elsewhere
+            raise InputError(str(self.path), None, "is a symbolic link; a results folder's ledger must be its own file")
         try:
             self.db = sqlite3.connect(self.path, timeout=30.0, isolation_level=None)
             self._check_or_create(create)
@@ -99,6 +101,9 @@ class Ledger:
                 found = FORMAT
             if found != FORMAT:
                 raise InputError(str(self.path), None, "not a gpis-harness ledger (a foreign SQLite database)")
+            missing = sorted({"runs", *_COLUMNS} - tables)
+            if missing:
+                raise InputError(str(self.path), None, f"the ledger is damaged (its table '{missing[0]}' is missing)")
             check = self.db.execute("PRAGMA quick_check").fetchone()[0]
             if check != "ok":
                 raise InputError(str(self.path), None, f"the ledger is damaged ({check})")

@@ -20,8 +20,8 @@ def environment() -> dict:
             versions[pkg] = None
     try:
         root = Path(__file__).resolve().parent.parent
-        commit = subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True, text=True, check=False,
-                                timeout=10).stdout.strip() or None
+        commit = subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True, text=True,
+                                check=False, timeout=10).stdout.strip() or None
         dirty = bool(subprocess.run(["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
                                     capture_output=True, text=True, check=False, timeout=10).stdout.strip())
     except (OSError, subprocess.SubprocessError):

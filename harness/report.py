@@ -18,8 +18,10 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
+from harness.config import ExperimentConfig, stored_scene_names
 from harness.errors import InputError
 from harness.ledger import FILENAME, Ledger
+from harness.outputs import write_atomic, write_text
 from harness.quality import wilson_interval
 
 BOOTSTRAP = 2000
@@ -51,7 +53,8 @@ def load(out_dir: Path, config_hash: str | None = None) -> dict:
 
 
 def expected(config: dict) -> tuple[list[str], list[str], int]:
-    scenes = [Path(p).stem for p in config["scenes"]]
+    """The scene names, planner labels and realisations a complete run has."""
+    scenes = list(stored_scene_names(config))
     planners = [p["label"] for p in config["planners"]]
     return scenes, planners, config["realisations"]
 
@@ -328,12 +331,9 @@ def write_report(out_dir: Path, figures: bool = True) -> dict:
     cal, bins = calibration(data)
     fails = failures(data)
     verdicts = reasons(data)
-    s.to_csv(out_dir / "summary.csv", index=False)
-    comp.to_csv(out_dir / "comparisons.csv", index=False)
-    cal.to_csv(out_dir / "calibration.csv", index=False)
-    bins.to_csv(out_dir / "reliability.csv", index=False)
-    fails.to_csv(out_dir / "failures.csv", index=False)
-    verdicts.to_csv(out_dir / "reasons.csv", index=False)
+    for name, frame in (("summary", s), ("comparisons", comp), ("calibration", cal), ("reliability", bins),
+                        ("failures", fails), ("reasons", verdicts)):
+        write_atomic(out_dir / f"{name}.csv", lambda tmp, frame=frame: frame.to_csv(tmp, index=False))
     md = ["# " + data["config"]["name"], "", display_table(s).to_markdown(index=False), ""]
     if not comp.empty:
         shown = comp.copy()
@@ -352,17 +352,17 @@ def write_report(out_dir: Path, figures: bool = True) -> dict:
            "## Analytic verdict of each posterior trial's draw against its physical outcome (all planners)", "",
            (verdicts[verdicts.planner == ALL].drop(columns="planner").to_markdown(index=False)
             if not verdicts.empty else "(no analytic verdicts)"), ""]
-    (out_dir / "summary.md").write_text("\n".join(md))
-    (out_dir / "summary.tex").write_text(_latex(s))
+    write_text(out_dir / "summary.md", "\n".join(md))
+    write_text(out_dir / "summary.tex", _latex(s))
     for table in ("trials", "plans"):
-        data[table].to_parquet(out_dir / f"{table}.parquet", index=False)
+        write_atomic(out_dir / f"{table}.parquet", lambda tmp, table=table: data[table].to_parquet(tmp, index=False))
     runs = data["runs"]
     manifest = {"config": data["config"], "config_hash": data["hash"], **data["environment"],
                 "started": runs.started.iloc[0], "ended": runs.ended.iloc[-1],
                 "invocations": [{"started": r.started, "ended": r.ended, "status": r.status,
                                  "git_commit": json.loads(r.environment).get("git_commit")}
                                 for r in runs.itertuples()]}
-    (out_dir / "manifest.json").write_text(json.dumps(manifest, indent=2, default=str) + "\n")
+    write_text(out_dir / "manifest.json", json.dumps(manifest, indent=2, default=str) + "\n")
     if figures:
         _figures(out_dir, data, s, bins, fails)
     return {"summary": s, "comparisons": comp, "calibration": cal}
@@ -374,19 +374,20 @@ def _figures(out_dir, data, summary, bins, fails) -> list:
 
     from harness import plots
     from harness.belief import build_belief
-    from harness.config import ExperimentConfig
     from harness.seeding import stream
     from harness.tasks import scene_of, settings_of
 
     folder = Path(out_dir) / "figures"
+    if folder.is_symlink() or (folder.exists() and not folder.is_dir()):
+        raise InputError(str(folder), None, "is not a folder of this run's (a symbolic link or a file); remove it")
     folder.mkdir(exist_ok=True)
     written = []
 
     def save(fig, name):
-        path = folder / name
-        fig.savefig(path, dpi=110)
-        plt.close(fig)
-        written.append(path)
+        try:
+            written.append(write_atomic(folder / name, lambda tmp: fig.savefig(tmp, dpi=110, format="png")))
+        finally:
+            plt.close(fig)
 
     per_scene = summary[summary.scene != "all"]
     save(plots.success_figure(per_scene), "success.png")

@@ -7,6 +7,7 @@ naming the file, the field and what is wrong. ``docs/scenes.md`` documents the f
 from __future__ import annotations
 
 import csv
+import io
 import math
 import os
 import re
@@ -25,7 +26,7 @@ from harness.errors import InputError
 from harness.geometry import Grid, grid_sdf, grid_sdf_gradient, inside_region, largest_region, polygons
 from harness.sensor import REGION_KINDS, Region, SensorModel
 from harness.settings import BOUNDS
-from harness.toml_table import Table, read_toml
+from harness.toml_table import Table, read_text, read_toml
 
 LIBRARY = Path(os.environ.get("GPIS_HARNESS_SCENES", Path(__file__).resolve().parent.parent / "scenes"))
 
@@ -33,6 +34,9 @@ LIBRARY = Path(os.environ.get("GPIS_HARNESS_SCENES", Path(__file__).resolve().pa
 BORDER_CELLS = 2.0
 #: The shape's largest inscribed circle must have at least this radius, in cells.
 MIN_INSCRIBED_CELLS = 1.0
+#: A scene's name keys its plans and trials and names its figures: a file name's safe subset.
+SAFE_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}")
+SAFE_NAME_RULE = "use 1 to 64 letters, digits, '.', '_' or '-', starting with a letter or digit"
 SHAPE_TYPES = ("polygon", "outline", "rectangle", "disk", "ring", "capsule", "union", "random")
 
 
@@ -134,6 +138,12 @@ def load_scene(name_or_path: str | Path, overrides: dict | None = None) -> Scene
     return parse_scene(_merged(data, overrides or {}), source=str(path), base_dir=path.parent, default_name=path.stem)
 
 
+def _printable(text: str) -> str:
+    """``text`` for a one-line message: control characters escaped, long text cut."""
+    shown = text.encode("unicode_escape").decode("ascii")
+    return shown if len(shown) <= 70 else shown[:67] + "..."
+
+
 def _merged(data: dict, overrides: dict) -> dict:
     out = dict(data)
     for key, value in overrides.items():
@@ -146,6 +156,10 @@ def parse_scene(data: dict, source: str, base_dir: Path, default_name: str = "sc
     """Validate a parsed scene document (see ``docs/scenes.md``)."""
     root = Table(data, "", source)
     name = root.string("name", default_name)
+    if not SAFE_NAME.fullmatch(name):
+        field = "name" if "name" in data else None
+        raise root.error(field, f"scene name '{_printable(name)}' is not usable: {SAFE_NAME_RULE}"
+                                + ("" if field else " (it comes from the file name; set `name` in the file)"))
     description = root.string("description", "")
 
     g = root.table("grid")
@@ -258,12 +272,14 @@ def _outline(t: Table, cell: float, base_dir: Path) -> Polygon:
         raise t.error("path", "must not contain a NUL character")
     path = (base_dir / rel).resolve()
     try:
-        # utf-8-sig: spreadsheet programs often start a CSV with a byte-order mark
-        with open(path, newline="", encoding="utf-8-sig") as fh:
-            rows = list(csv.reader(fh))
-    except (OSError, UnicodeDecodeError, csv.Error) as exc:
-        detail = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
-        raise t.error("path", f"cannot read outline {path}: {detail}") from None
+        text = read_text(path)
+        if "\0" in text:
+            raise InputError(str(path), None, "not a text file (it contains NUL bytes)")
+        rows = list(csv.reader(io.StringIO(text, newline="")))
+    except InputError as exc:
+        raise t.error("path", f"outline {path}: {exc.message}") from None
+    except csv.Error as exc:
+        raise t.error("path", f"outline {path}: not a CSV file ({exc})") from None
     if not rows or [c.strip().lower() for c in rows[0]] != ["x", "y"]:
         raise t.error("path", f"outline {path}: first line must be the header 'x,y'")
     vertices = []

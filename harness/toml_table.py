@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import re
+import stat
 import tomllib
 from pathlib import Path
 from typing import Any
@@ -16,22 +18,58 @@ from typing import Any
 from harness.errors import InputError
 
 
+#: The largest input file read (a scene, a config, an outline): 8 MiB is ten times the
+#: largest outline a traced object needs, and stops a mistaken path (a disk image, a
+#: device) before it fills the memory.
+MAX_INPUT_BYTES = 8 * 2**20
+
+
+def read_text(path: Path | str, source: str | None = None, limit: int = MAX_INPUT_BYTES) -> str:
+    """A regular file's text (UTF-8, an initial byte-order mark dropped); InputError
+    naming ``source`` (default: the path) for a device, a folder, a FIFO, a file larger
+    than ``limit`` bytes, or bytes that are not text."""
+    source = str(path) if source is None else source
+    try:
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0))
+    except OSError as exc:
+        raise InputError(source, None, f"cannot read: {exc.strerror or exc}") from None
+    try:
+        info = os.fstat(fd)
+        if not stat.S_ISREG(info.st_mode):
+            raise InputError(source, None, "not a regular file")
+        if info.st_size > limit:
+            raise InputError(source, None, f"{info.st_size} bytes is larger than the {limit // 2**20} MiB an "
+                                           "input file may have")
+        data = os.read(fd, limit + 1)
+        while len(data) <= limit and (more := os.read(fd, limit + 1 - len(data))):
+            data += more
+    except OSError as exc:
+        raise InputError(source, None, f"cannot read: {exc.strerror or exc}") from None
+    finally:
+        os.close(fd)
+    if len(data) > limit:
+        raise InputError(source, None, f"larger than the {limit // 2**20} MiB an input file may have")
+    try:
+        text = data.decode("utf-8-sig")  # spreadsheet programs often start a CSV with a byte-order mark
+    except UnicodeDecodeError:
+        raise InputError(source, None, "not a text file (invalid UTF-8)") from None
+    return text
+
+
 def read_toml(path: Path) -> dict:
     """A TOML file's document; InputError (one line naming the file) when it cannot be read."""
     source = str(path)
+    text = read_text(path)
     try:
-        text = Path(path).read_bytes().decode("utf-8")
         return tomllib.loads(text)
-    except UnicodeDecodeError:
-        raise InputError(source, None, "not a text file (invalid UTF-8)") from None
     except tomllib.TOMLDecodeError as exc:
         raise InputError(source, None, f"invalid TOML: {exc}") from None
     except RecursionError:  # tomllib recurses once per level of nested arrays and inline tables
         raise InputError(source, None, "invalid TOML: arrays or inline tables nested too deeply") from None
-    except OSError as exc:
-        raise InputError(source, None, f"cannot read: {exc.strerror or exc}") from None
 
 
+# ---------------------------------------------------------------------------
+# A typed reader over one TOML table
 
 
 _REQUIRED = object()

@@ -250,6 +250,8 @@ BAD_CONFIGS = [
 
 @pytest.mark.parametrize(("text", "field"), BAD_CONFIGS)
 def test_bad_configs_get_one_line_naming_the_field(tmp_path, capsys, text, field):
+    if "scenes" not in text:  # a config must name its scenes
+        text = 'scenes = ["disk"]\n' + text
     path = _write(tmp_path, text, "bad.toml")
     assert _eval(path, tmp_path / "out") == 2
     err = capsys.readouterr().err.strip()
@@ -359,13 +361,14 @@ def test_a_cell_plans_with_one_blas_thread_and_the_same_results(tmp_path, monkey
 
 
 def test_physics_overrides_reach_the_protocol(tmp_path):
-    path = _write(tmp_path, '[physics]\ncone_friction = false\nsolver_iterations = 80\n[[planners]]\nname = "gp-p"',
-                  "pyramid.toml")
+    head = 'scenes = ["disk"]\n'
+    text = head + '[physics]\ncone_friction = false\nsolver_iterations = 80\n[[planners]]\nname = "gp-p"'
+    path = _write(tmp_path, text, "pyramid.toml")
     protocol = load_config(path).protocol()
     assert (protocol.cone_friction, protocol.solver_iterations) == (False, 80)
-    assert load_config(_write(tmp_path, '[[planners]]\nname = "gp-p"', "cone.toml")).protocol().cone_friction
+    assert load_config(_write(tmp_path, head + '[[planners]]\nname = "gp-p"', "cone.toml")).protocol().cone_friction
     flipped = str(not Protocol().table_hull).lower()
-    path = _write(tmp_path, f'[physics]\ntable_hull = {flipped}\n[[planners]]\nname = "gp-p"', "foot.toml")
+    path = _write(tmp_path, head + f'[physics]\ntable_hull = {flipped}\n[[planners]]\nname = "gp-p"', "foot.toml")
     assert load_config(path).protocol().table_hull is not Protocol().table_hull
 
 

@@ -702,7 +702,7 @@ INVALID = {
                                                    "0.05 m is out of range (0, 0.04]"),
     "random seed negative": (GRID + '[shape]\ntype = "random"\nseed = -1\nradius = 0.02\n', "shape.seed",
                              "out of range [0, 9223372036854775807]"),
-    "outline missing": (GRID + outline_body("nowhere.csv"), "shape.path", "cannot read outline"),
+    "outline missing": (GRID + outline_body("nowhere.csv"), "shape.path", "cannot read: No such file"),
     "outline path with a NUL": (GRID + outline_body("a\\u0000b.csv"), "shape.path",
                                 "must not contain a NUL character"),
 }
@@ -748,7 +748,8 @@ def test_outline_csv_that_is_not_utf8_is_reported_on_the_path_field(tmp_path, ch
     path.write_text(GRID + outline_body("o.csv"), encoding="utf-8")
     code, _, err = check(path)
     assert code == 2 and len(err) == 1
-    assert err[0].startswith(f"gpis-harness: error: {path}: shape.path: cannot read outline ")
+    outline = tmp_path / "o.csv"
+    assert err[0] == f"gpis-harness: error: {path}: shape.path: outline {outline}: not a text file (invalid UTF-8)"
 
 
 @pytest.mark.parametrize("content, message", [

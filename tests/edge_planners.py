@@ -1,0 +1,26 @@
+"""Planners at the edges of what the harness accepts (imported as module:Class)."""
+
+from __future__ import annotations
+
+from harness.grasp import Grasp
+from planners.base import Plan, Planner
+
+#: A grasp across the disk scene exactly as wide as its 0.10 m opening, up to rounding:
+#: math.dist gives 0.10000000000000002.
+ROUNDED = ((-0.05, 0.0), (0.05000000000000002, 0.0))
+#: One micrometre wider than the opening: a real excess.
+TOO_WIDE = ((-0.05, 0.0), (0.050001, 0.0))
+
+
+class WideByRounding(Planner):
+    name = "test-wide-by-rounding"
+
+    def plan(self, problem, rng):
+        return Plan(Grasp(*ROUNDED), "ok")
+
+
+class WiderThanOpening(Planner):
+    name = "test-wider-than-opening"
+
+    def plan(self, problem, rng):
+        return Plan(Grasp(*TOO_WIDE), "ok")
