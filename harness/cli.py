@@ -239,12 +239,12 @@ def _compare(args) -> int:
 
 
 def _planners_list(args) -> int:
-    from planners.registry import available
+    from planners.registry import available, range_text
 
     found, broken = available()
     for name in sorted(found):
         cls = found[name]
-        params = ", ".join(f"{k}={v!r}" for k, v in cls.parameters().items())
+        params = ", ".join(f"{k}={v!r} {range_text(cls, k)}".rstrip() for k, v in cls.parameters().items())
         print(f"{name}: {cls.description}")
         print(f"    parameters: {params or 'none'}")
     for name, error in sorted(broken.items()):
