@@ -196,12 +196,14 @@ def _simulate(args) -> int:
 
 
 def _eval(args) -> int:
+    from harness.executor import check_scheduler
     from harness.experiment import load_config, run_experiment
 
     config = load_config(args.config)
     out = Path(args.out) if args.out else Path("results") / config.name
     if out.exists() and not out.is_dir():
         raise InputError("--out", None, f"{out} exists and is not a folder")
+    check_scheduler(args.scheduler)  # before the ledger records a run
 
     def log(line: str) -> None:
         print(line, file=sys.stderr, flush=True)
@@ -408,7 +410,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--workers", type=_positive_int, default=None,
                    help="worker processes (default: the number of cores)")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
-                   help="a Dask scheduler address, or 'local' for a Dask LocalCluster")
+                   help="a Dask scheduler (tcp://HOST:PORT, or tls://HOST:PORT with Dask's TLS config), "
+                        "or 'local' for a Dask LocalCluster")
     p.add_argument("--fresh", action="store_true", help="discard this experiment's ledger rows and start over")
     p.add_argument("--no-report", action="store_true", help="skip the report at the end")
     p.set_defaults(func=_eval)
