@@ -197,10 +197,12 @@ def _simulate(args) -> int:
 
 def _eval(args) -> int:
     from harness.config import load_config
+    from harness.executor import check_scheduler
     from harness.experiment import run_experiment
     from harness.outputs import command_line, folder_lock, output_folder, storage
 
     config = load_config(args.config)
+    check_scheduler(args.scheduler)  # before any folder or ledger exists
     out = output_folder(Path(args.out) if args.out else Path("results") / config.name)
 
     def log(line: str) -> None:
@@ -250,12 +252,12 @@ def _compare(args) -> int:
 
 
 def _planners_list(args) -> int:
-    from planners.registry import available
+    from planners.registry import available, range_text
 
     found, broken = available()
     for name in sorted(found):
         cls = found[name]
-        params = ", ".join(f"{k}={v!r}" for k, v in cls.parameters().items())
+        params = ", ".join(f"{k}={v!r} {range_text(cls, k)}".rstrip() for k, v in cls.parameters().items())
         print(f"{name}: {cls.description}")
         print(f"    parameters: {params or 'none'}")
     for name, error in sorted(broken.items()):
@@ -423,7 +425,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--workers", type=_positive_int, default=None,
                    help="worker processes (default: the number of cores)")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
-                   help="a Dask scheduler address, or 'local' for a Dask LocalCluster")
+                   help="a Dask scheduler (tcp://HOST:PORT, or tls://HOST:PORT with Dask's TLS config), "
+                        "or 'local' for a Dask LocalCluster")
     p.add_argument("--fresh", action="store_true", help="discard this experiment's ledger rows and start over")
     p.add_argument("--no-report", action="store_true", help="skip the report at the end")
     p.set_defaults(func=_eval)

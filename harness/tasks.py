@@ -156,7 +156,7 @@ def _plan_row(config, entry: PlannerEntry, scene, belief, realisation, settings)
         row.update(status="overtime", message=f"stopped after {time.perf_counter() - start:.1f} s "
                                               f"(budget {budget:g} s)", plan_time_s=time.perf_counter() - start)
         return row
-    except Exception as exc:  # noqa: BLE001 - a plugin's bug is an outcome, not the end of the experiment
+    except (Exception, SystemExit) as exc:  # noqa: BLE001 - a plugin's bug (even sys.exit) is an outcome
         row.update(status="raised", message=f"{type(exc).__name__}: {exc}"[:500],
                    plan_time_s=time.perf_counter() - start)
         return row

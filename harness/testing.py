@@ -21,14 +21,16 @@ def check_planner(planner_class, scenes=("disk", "rectangle"), seeds=(0, 1), tim
     """Check a planner class against the contract; raise AssertionError saying what is
     wrong, or return a short report (plan times by scene and seed).
 
-    Checks: the class has a name and a one-line description, every constructor
-    parameter has a default and is stored under its own name; on every scene and seed,
+    Checks: the class has a name and a one-line description, implements ``plan``, its
+    BOUNDS name parameters and hold their defaults, every constructor parameter has a
+    default and is stored under its own name; on every scene and seed,
     ``plan`` returns a Plan with a known status and a grasp that is finite, inside the
     grid and no wider than the opening; the same seed gives the same grasp; with a time
     budget the plan returns within the budget plus ``slack`` seconds; on a belief with no
     surface the plan's status is "no_surface" (not an exception).
     """
     from planners.base import STATUSES, Plan, Planner, Problem
+    from planners.registry import class_problem, parameter_value
 
     name = getattr(planner_class, "name", "")
     _require(isinstance(planner_class, type) and issubclass(planner_class, Planner),
@@ -37,12 +39,20 @@ def check_planner(planner_class, scenes=("disk", "rectangle"), seeds=(0, 1), tim
     description = getattr(planner_class, "description", "")
     _require(isinstance(description, str) and description and "\n" not in description,
              f"{name}: `description` must be one line")
+    problem = class_problem(planner_class)
+    _require(problem is None, f"{name}: {problem}")
     defaults = planner_class.parameters()
     missing = [k for k, v in defaults.items() if v is _EMPTY]
     _require(not missing, f"{name}: every constructor parameter needs a default: {missing}")
+    for key, default in defaults.items():
+        try:
+            parameter_value(planner_class, key, default)
+        except ValueError as exc:
+            raise AssertionError(f"{name}: the default of {key} is refused: {exc}") from None
     planner = planner_class(**(params or {}))
-    stored = planner.get_params()
-    _require(set(stored) == set(defaults), f"{name}: store each parameter under its own name")
+    unstored = [k for k in defaults if not hasattr(planner, k)]
+    _require(not unstored, f"{name}: store each parameter under its own name (in __init__, "
+             f"self.<name> = <name>); not stored: {', '.join(unstored)}")
 
     report = {}
     for scene_name in scenes:

@@ -7,8 +7,11 @@ Write a planner by subclassing :class:`Planner`:
   ``description`` (one line);
 - give ``__init__`` only keyword parameters, each with a default, and store each one
   under its own name (``self.candidates = candidates``): that is how ``planners list``
-  shows them and how ``--param KEY=VALUE`` sets them;
-- implement ``plan(problem, rng)``: use only ``rng`` for randomness, check
+  shows them and how ``--param KEY=VALUE`` sets them. The default's type is the
+  parameter's type (an int parameter refuses 2.5 and true, a float one nan and inf);
+  ``BOUNDS`` gives numeric parameters their inclusive ranges, checked before ``__init__``
+  runs when a planner is made from a config or the command line;
+- implement ``plan(problem, rng)`` (abstract here): use only ``rng`` for randomness, check
   ``problem.time_budget_s`` between units of work, and return a Plan whose status says
   what happened (never raise for a belief without a surface: return
   ``Plan.without_grasp("no_surface", ...)``).
@@ -21,6 +24,7 @@ from __future__ import annotations
 
 import inspect
 import time
+from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from typing import ClassVar
 
@@ -87,14 +91,18 @@ class Plan:
         return cls(None, status, message=message, **stats)
 
 
-class Planner:
+class Planner(ABC):
     """Base class of planners; see the module docstring for the contract."""
 
     name: ClassVar[str] = ""
     description: ClassVar[str] = ""
+    #: Inclusive ranges of numeric parameters, ``{"candidates": (1, 10_000)}``; None for an
+    #: open end. planners.registry.make_planner refuses a value outside its range.
+    BOUNDS: ClassVar[dict] = {}
 
-    def plan(self, problem: Problem, rng: np.random.Generator) -> Plan:  # pragma: no cover - abstract
-        raise NotImplementedError
+    @abstractmethod
+    def plan(self, problem: Problem, rng: np.random.Generator) -> Plan:
+        """The grasp for ``problem``, using only ``rng`` for randomness."""
 
     @classmethod
     def parameters(cls) -> dict:

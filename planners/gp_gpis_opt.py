@@ -46,6 +46,9 @@ COM_SAMPLES = 64
 class GPGPISOpt(Planner):
     name = "gp-gpis-opt"
     description = "sequential convex programming on a smooth P_F (or P_L) surrogate minus an uncertainty penalty (OSQP)"
+    BOUNDS = {"initialisations": (1, 1000), "screen": (1, 10_000), "nu": (0.0, 100.0),
+              "temperature_deg": (0.1, 45.0), "max_iterations": (1, 1000), "finalists": (0, 1000),
+              "rerank_samples": (1, 10_000), "angular_noise_deg": (0.0, 90.0)}
 
     def __init__(self, initialisations: int = 10, screen: int = 100, nu: float = 1.0, temperature_deg: float = 5.0,
                  max_iterations: int = 20, finalists: int = 0, rerank_samples: int = 200,

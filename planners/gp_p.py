@@ -14,6 +14,7 @@ from planners.sampling import search
 class GPP(Planner):
     name = "gp-p"
     description = "Monte-Carlo ranking: candidates ranked by P_F (or P_L) over a shared pool of shape samples"
+    BOUNDS = {"candidates": (1, 10_000), "samples": (1, 10_000), "angular_noise_deg": (0.0, 90.0)}
 
     def __init__(self, candidates: int = 100, samples: int = 1000, angular_noise_deg: float = 10.0,
                  quality: str = "force_closure"):

@@ -16,6 +16,7 @@ from planners.sampling import search
 class MeanShape(Planner):
     name = "mean-shape"
     description = "baseline: candidates ranked by Ferrari-Canny quality (or the lift) on the posterior mean shape"
+    BOUNDS = {"candidates": (1, 10_000), "angular_noise_deg": (0.0, 90.0)}
 
     def __init__(self, candidates: int = 100, angular_noise_deg: float = 10.0, quality: str = "force_closure"):
         if candidates < 1:

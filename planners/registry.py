@@ -1,21 +1,48 @@
 """Finding planners: the built-ins, and plugins registered under the entry-point group
-``gpis_harness.planners``; making one from KEY=VALUE parameters."""
+``gpis_harness.planners``; making one from parameters checked against the types of their
+defaults and the planner's BOUNDS (the one check for configs and ``--param``)."""
 
 from __future__ import annotations
 
 import importlib
+import inspect
+import math
+import numbers
 from importlib.metadata import entry_points
 
-from harness.errors import InputError
+from harness.errors import InputError, describe
 from planners.base import Planner
 
 ENTRY_POINT_GROUP = "gpis_harness.planners"
 BUILTINS = ("planners.mean_shape:MeanShape", "planners.gp_p:GPP", "planners.gp_gpis_opt:GPGPISOpt")
 
+_TRUE = ("true", "yes", "1")
+_FALSE = ("false", "no", "0")
+
 
 def _load(target: str):
     module, _, attr = target.partition(":")
     return getattr(importlib.import_module(module), attr)
+
+
+def class_problem(cls) -> str | None:
+    """What keeps ``cls`` from being used as a planner, or None: not a Planner subclass,
+    ``plan`` not implemented, or BOUNDS that are not ``{parameter: (low, high)}``."""
+    if not (isinstance(cls, type) and issubclass(cls, Planner)):
+        return "not a Planner subclass"
+    if inspect.isabstract(cls):
+        return f"does not implement {', '.join(sorted(cls.__abstractmethods__))}()"
+    bounds = cls.BOUNDS
+    if not isinstance(bounds, dict):
+        return "BOUNDS must be a dict {parameter: (low, high)}"
+    defaults = cls.parameters()
+    for key, pair in bounds.items():
+        if key not in defaults:
+            return f"BOUNDS names '{key}', which is not a parameter"
+        if not (isinstance(pair, (tuple, list)) and len(pair) == 2
+                and all(end is None or _is_number(end) for end in pair)):
+            return f"BOUNDS['{key}'] must be (low, high), numbers or None, got {pair!r}"
+    return None
 
 
 def available() -> tuple[dict, dict]:
@@ -28,10 +55,11 @@ def available() -> tuple[dict, dict]:
     for ep in entry_points(group=ENTRY_POINT_GROUP):
         try:
             cls = ep.load()
-            if not (isinstance(cls, type) and issubclass(cls, Planner) and cls.name):
-                raise TypeError("not a Planner subclass with a name")
-        except Exception as exc:  # a broken plugin must not break the harness
-            broken[ep.name] = f"{type(exc).__name__}: {exc}"
+            problem = class_problem(cls) or (None if cls.name else "a Planner subclass without a name")
+        except (Exception, SystemExit) as exc:  # a broken plugin must not break the harness
+            problem = describe(exc)
+        if problem:
+            broken[ep.name] = problem
             continue
         found.setdefault(cls.name, cls)
     return found, broken
@@ -39,14 +67,13 @@ def available() -> tuple[dict, dict]:
 
 def planner_class(name: str) -> type:
     """The class registered as ``name``, or, for ``module:Class``, that class imported
-    directly (a planner under development needs no packaging)."""
+    directly (a planner under development needs no packaging). Importing runs the
+    module's code: whatever it raises, or a sys.exit, is bad input naming the planner."""
     if ":" in name:
-        try:
-            cls = _load(name)
-        except (ImportError, AttributeError, ValueError) as exc:
-            raise InputError("--planner", None, f"cannot import planner '{name}': {exc}") from None
-        if not (isinstance(cls, type) and issubclass(cls, Planner)):
-            raise InputError("--planner", None, f"'{name}' is not a Planner subclass")
+        cls = _import(name)
+        problem = class_problem(cls)
+        if problem:
+            raise InputError("--planner", None, f"planner '{name}': {problem}")
         return cls
     found, broken = available()
     if name not in found:
@@ -55,9 +82,28 @@ def planner_class(name: str) -> type:
     return found[name]
 
 
+def _import(name: str):
+    module, _, attr = name.partition(":")
+    if not module.strip() or not attr.strip():
+        raise InputError("--planner", None, f"planner '{name}': expected module:Class")
+    try:
+        loaded = importlib.import_module(module)
+    except (Exception, SystemExit) as exc:  # the module's own code failed (or exited) while importing
+        missing = isinstance(exc, ModuleNotFoundError) and exc.name is not None and \
+            (module == exc.name or module.startswith(exc.name + "."))
+        reason = (f"no module named '{exc.name}' (is its folder on PYTHONPATH?)" if missing
+                  else f"importing {module} raised {describe(exc)}")
+        raise InputError("--planner", None, f"planner '{name}': {reason}") from None
+    if not hasattr(loaded, attr):
+        raise InputError("--planner", None, f"planner '{name}': module {module} has no attribute '{attr}'")
+    return getattr(loaded, attr)
+
+
 def make_planner(name: str, params: dict | None = None, source: str = "--param") -> Planner:
-    """A planner with the given parameters; string values are read as the type of the
-    parameter's default. Unknown parameters and unreadable values are bad input."""
+    """A planner with the given parameters, each checked by :func:`parameter_value`.
+    Unknown parameters, values of the wrong type or out of range, and a constructor that
+    refuses a value (ValueError), raises anything else or does not store its parameters
+    are bad input (InputError)."""
     cls = planner_class(name)
     defaults = cls.parameters()
     values = {}
@@ -65,27 +111,102 @@ def make_planner(name: str, params: dict | None = None, source: str = "--param")
         if key not in defaults:
             known = ", ".join(defaults) or "none"
             raise InputError(source, key, f"unknown parameter of planner '{name}' (parameters: {known})")
-        values[key] = _convert(raw, defaults[key], source, key) if isinstance(raw, str) else raw
+        try:
+            values[key] = parameter_value(cls, key, raw)
+        except ValueError as exc:
+            raise InputError(source, key, str(exc)) from None
     try:
-        return cls(**values)
-    except (TypeError, ValueError) as exc:
+        planner = cls(**values)
+    except ValueError as exc:  # the contract's way of refusing a value
         raise InputError(source, None, f"planner '{name}': {exc}") from None
+    except (Exception, SystemExit) as exc:
+        raise InputError("--planner", None, f"planner '{name}': constructing it raised {describe(exc)}") \
+            from None
+    unstored = [k for k in defaults if not hasattr(planner, k)]
+    if unstored:
+        raise InputError("--planner", None, f"planner '{name}' does not store its parameters under their own "
+                                            f"names (missing: {', '.join(unstored)}; see planners/base.py)")
+    return planner
 
 
-def _convert(raw: str, default, source: str, key: str):
-    kind = type(default)
-    try:
-        if kind is bool:
-            if raw.lower() not in ("true", "false", "1", "0", "yes", "no"):
-                raise ValueError
-            return raw.lower() in ("true", "1", "yes")
-        if kind is int:
+def parameter_value(cls, key: str, raw):
+    """``raw`` as a value of ``cls``'s parameter ``key``; ValueError saying why not.
+
+    The default's type is the parameter's type: an int parameter takes integers (not 2.5,
+    not true), a float parameter finite numbers (an integer becomes a float), a bool
+    parameter true or false, a str parameter a string. A string given to a parameter of
+    another type is read as its text (``--param KEY=VALUE`` gives strings). A parameter
+    whose default is of another type (None, a tuple) takes any value unchecked. Numbers
+    must then lie in ``cls.BOUNDS[key]`` (inclusive), when given.
+    """
+    kind = type(cls.parameters()[key])
+    if kind is bool:
+        return _boolean(raw)
+    if kind is str:
+        if not isinstance(raw, str):
+            raise ValueError(f"expected a string, got {_show(raw)}")
+        return raw
+    if kind is int:
+        value = _integer(raw)
+    elif kind is float:
+        value = _finite(raw)
+    else:
+        return raw
+    lo, hi = cls.BOUNDS.get(key, (None, None))
+    if (lo is not None and value < lo) or (hi is not None and value > hi):
+        raise ValueError(f"{_show(value)} is out of range {range_text(cls, key)}")
+    return value
+
+
+def range_text(cls, key: str) -> str:
+    """A parameter's range as ``[low, high]`` (open ends as -inf, inf), or "" without one."""
+    if key not in cls.BOUNDS:
+        return ""
+    lo, hi = cls.BOUNDS[key]
+    return f"[{'-inf' if lo is None else lo}, {'inf' if hi is None else hi}]"
+
+
+def _boolean(raw) -> bool:
+    if isinstance(raw, bool):
+        return raw
+    if isinstance(raw, str) and raw.strip().lower() in _TRUE + _FALSE:
+        return raw.strip().lower() in _TRUE
+    raise ValueError(f"expected true or false, got {_show(raw)}")
+
+
+def _integer(raw) -> int:
+    if isinstance(raw, str):
+        try:
             return int(raw)
-        if kind is float:
-            value = float(raw)
-            if value != value or value in (float("inf"), float("-inf")):
-                raise ValueError
-            return value
+        except ValueError:
+            raise ValueError(f"expected an integer, got {_show(raw)}") from None
+    if isinstance(raw, numbers.Integral) and not isinstance(raw, bool):
+        return int(raw)
+    raise ValueError(f"expected an integer, got {_show(raw)}")
+
+
+def _finite(raw) -> float:
+    if not (isinstance(raw, str) or _is_number(raw)):
+        raise ValueError(f"expected a finite number, got {_show(raw)}")
+    try:
+        value = float(raw)
+    except OverflowError:  # an integer beyond float's range
+        value = math.inf
     except ValueError:
-        raise InputError(source, key, f"expected {kind.__name__}, got '{raw}'") from None
-    return raw
+        raise ValueError(f"expected a finite number, got {_show(raw)}") from None
+    if not math.isfinite(value):
+        raise ValueError(f"expected a finite number, got {_show(raw)}")
+    return value
+
+
+def _is_number(value) -> bool:
+    return isinstance(value, numbers.Real) and not isinstance(value, bool)
+
+
+def _show(value) -> str:
+    """A value as the user wrote it: TOML's true and false, strings quoted, long ones cut."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+

@@ -24,3 +24,10 @@ class WiderThanOpening(Planner):
 
     def plan(self, problem, rng):
         return Plan(Grasp(*TOO_WIDE), "ok")
+
+
+class ExitsInPlan(Planner):
+    name = "test-exits-in-plan"
+
+    def plan(self, problem, rng):
+        raise SystemExit(3)

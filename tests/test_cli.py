@@ -5,8 +5,13 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from pathlib import Path
+
+import pytest
 
 from harness.cli import main
+
+REPO = Path(__file__).resolve().parents[1]
 
 
 def test_scenes_show_writes_a_png(tmp_path, capsys):
@@ -113,3 +118,37 @@ def test_simulate_bad_input_gets_one_line_and_exit_code_2(tmp_path, capsys):
         assert main(argv) == 2, argv
         err = capsys.readouterr().err
         assert len(err.strip().splitlines()) == 1 and err.startswith("gpis-harness: error: "), (argv, err)
+
+
+def _closed_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.mark.parametrize("scheduler, complaint", [
+    ("nonsense", "expected 'local' or SCHEME://HOST:PORT"),
+    ("tcp://127.0.0.1:99999", "port 99999 is out of range [1, 65535]"),
+    ("tls://127.0.0.1:8786", "needs Dask's TLS settings"),
+    ("tcp://127.0.0.1:{closed}", "cannot connect to a Dask scheduler at tcp://127.0.0.1:{closed}"),
+])
+def test_eval_refuses_a_bad_scheduler_in_one_line_before_the_ledger_records_a_run(tmp_path, capsys, monkeypatch,
+                                                                                  scheduler, complaint):
+    import dask
+    import distributed  # noqa: F401 - its config defaults first, then the test's TLS-free settings
+
+    from harness import executor
+
+    monkeypatch.setattr(executor, "CONNECT_TIMEOUT", "0.5s")
+    closed = _closed_port()
+    scheduler, complaint = scheduler.format(closed=closed), complaint.format(closed=closed)
+    out = tmp_path / "out"
+    with dask.config.set({"distributed.comm.tls.ca-file": None, "distributed.comm.tls.client.cert": None}):
+        assert main(["eval", str(REPO / "experiments" / "quick.toml"), "--out", str(out),
+                     "--scheduler", scheduler]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and err.startswith("gpis-harness: error: --scheduler: "), err
+    assert complaint in err, err
+    assert not out.exists()  # no ledger, so no run left marked 'running'

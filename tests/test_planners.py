@@ -26,6 +26,8 @@ from planners.gp_p import GPP
 from planners.mean_shape import MeanShape
 from planners.registry import make_planner
 
+from faulty_planners import ForgetsParameter, NoPlan
+
 
 @pytest.fixture(scope="module")
 def beliefs():
@@ -95,11 +97,32 @@ class _Fragile(_Outside):
         return Plan(Grasp((0.0, -0.04), (0.0, 0.04)), "ok")
 
 
+class _DefaultOutOfBounds(_Outside):
+    name = "default-out-of-bounds"
+    BOUNDS = {"x": (-0.1, 0.1)}
+
+
+class _BoundsOfNothing(_Outside):
+    name = "bounds-of-nothing"
+    BOUNDS = {"y": (0, 1)}
+
+
 @pytest.mark.parametrize("cls, complaint", [(_Outside, "outside the grid"), (_Random, "different grasps"),
-                                            (_Fragile, "no surface")])
+                                            (_Fragile, "no surface"),
+                                            (ForgetsParameter, "store each parameter under its own name.*not "
+                                                               "stored: candidates"),
+                                            (NoPlan, r"does not implement plan\(\)"),
+                                            (_DefaultOutOfBounds, r"the default of x is refused: 1.0 is out of "
+                                                                  r"range \[-0.1, 0.1\]"),
+                                            (_BoundsOfNothing, "BOUNDS names 'y', which is not a parameter")])
 def test_the_conformance_kit_catches_broken_planners(cls, complaint):
     with pytest.raises(AssertionError, match=complaint):
         check_planner(cls, scenes=("disk",), seeds=(0,))
+
+
+def test_plan_is_abstract():
+    with pytest.raises(TypeError, match="abstract"):
+        NoPlan()
 
 
 @pytest.mark.parametrize("name", library_names())
@@ -141,12 +164,129 @@ def test_parameters_are_read_as_the_type_of_their_default():
 
 
 @pytest.mark.parametrize("name, params, field", [("gp-p", {"nope": "1"}, "nope"), ("gp-p", {"samples": "x"}, "samples"),
-                                                 ("gp-p", {"samples": "0"}, None), ("bogus", {}, None),
+                                                 ("gp-p", {"samples": "0"}, "samples"), ("bogus", {}, None),
                                                  ("gp-gpis-opt", {"quality": "weight"}, None)])
 def test_bad_planner_names_and_parameters_are_input_errors(name, params, field):
     with pytest.raises(InputError) as err:
         make_planner(name, params)
     assert err.value.field == field
+
+
+def test_parameters_keep_their_types_and_floats_take_integers():
+    planner = make_planner("gp-gpis-opt", {"screen": 50, "nu": 1, "temperature_deg": "2"})
+    assert planner.screen == 50 and type(planner.nu) is float and planner.temperature_deg == 2.0
+
+
+# A planner named module:Class is imported, and made, when its config loads or `plan` starts:
+# whatever goes wrong there is bad input naming the planner (a fault in plan() is an outcome).
+BROKEN_MODULES = {"raises_on_import": "x = 1 / 0\n", "syntax_error": "def plan(:\n",
+                  "exits_on_import": "import sys\nsys.exit(3)\n",
+                  "needs_a_missing_module": "import no_such_dependency_of_a_planner\n"}
+UNLOADABLE = [
+    ("raises_on_import:Planner", "planner 'raises_on_import:Planner': importing raises_on_import raised "
+                                 "ZeroDivisionError: division by zero"),
+    ("syntax_error:Planner", "importing syntax_error raised SyntaxError: "),
+    ("exits_on_import:Planner", "planner 'exits_on_import:Planner': importing exits_on_import raised SystemExit: 3"),
+    ("needs_a_missing_module:Planner", "importing needs_a_missing_module raised ModuleNotFoundError: No module "
+                                       "named 'no_such_dependency_of_a_planner'"),
+    ("no_such_planner_module:Planner", "planner 'no_such_planner_module:Planner': no module named "
+                                       "'no_such_planner_module'"),
+    ("faulty_planners:Missing", "module faulty_planners has no attribute 'Missing'"),
+    ("faulty_planners:", "expected module:Class"),
+    ("faulty_planners:NotAPlanner", "planner 'faulty_planners:NotAPlanner': not a Planner subclass"),
+    ("faulty_planners:NoPlan", "planner 'faulty_planners:NoPlan': does not implement plan()"),
+    ("faulty_planners:FailsToConstruct", "planner 'faulty_planners:FailsToConstruct': constructing it raised "
+                                         "RuntimeError: cannot open weights.bin"),
+    ("faulty_planners:ExitsInInit", "planner 'faulty_planners:ExitsInInit': constructing it raised SystemExit: 4"),
+    ("faulty_planners:ForgetsParameter", "planner 'faulty_planners:ForgetsParameter' does not store its "
+                                         "parameters under their own names (missing: candidates;"),
+]
+
+
+def _broken_modules(tmp_path, monkeypatch):
+    for module, text in BROKEN_MODULES.items():
+        (tmp_path / f"{module}.py").write_text(text)
+    monkeypatch.syspath_prepend(str(tmp_path))
+
+
+def _config(tmp_path, planner: str, params: str = "") -> str:
+    path = tmp_path / "planner.toml"
+    path.write_text(f'scenes = ["disk"]\nrealisations = 1\n\n[[planners]]\nname = "{planner}"\n'
+                    + (f"params = {{ {params} }}\n" if params else ""))
+    return str(path)
+
+
+def _one_line(capsys) -> str:
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and err.startswith("gpis-harness: error: "), err
+    return err.strip()
+
+
+@pytest.mark.parametrize("name, message", UNLOADABLE)
+def test_a_planner_that_cannot_be_loaded_or_made_stops_plan_with_one_line(tmp_path, monkeypatch, capsys, name,
+                                                                          message):
+    from harness.cli import main
+
+    _broken_modules(tmp_path, monkeypatch)
+    assert main(["plan", "disk", "--planner", name]) == 2
+    err = _one_line(capsys)
+    assert err.startswith("gpis-harness: error: --planner: ") and message in err, err
+
+
+@pytest.mark.parametrize("name, message", UNLOADABLE)
+def test_a_config_naming_a_planner_that_cannot_be_loaded_or_made_is_one_line(tmp_path, monkeypatch, capsys, name,
+                                                                             message):
+    from harness.cli import main
+
+    _broken_modules(tmp_path, monkeypatch)
+    config = _config(tmp_path, name)
+    assert main(["eval", config, "--out", str(tmp_path / "out")]) == 2
+    err = _one_line(capsys)
+    assert err.startswith(f"gpis-harness: error: {config}: planners[0].name: ") and message in err, err
+    assert not (tmp_path / "out").exists()  # nothing started
+
+
+# Parameters are checked against their defaults' types and the planner's BOUNDS, in one
+# place for config values (TOML types) and --param text.
+BAD_PARAMETERS = [
+    ("gp-p", "candidates = 2.5", "candidates=2.5", "candidates: expected an integer, got 2.5",
+     "candidates: expected an integer, got '2.5'"),
+    ("gp-p", "candidates = true", "candidates=true", "candidates: expected an integer, got true",
+     "candidates: expected an integer, got 'true'"),
+    ("gp-p", "candidates = 1000000000000", "candidates=1000000000000",
+     "candidates: 1000000000000 is out of range [1, 10000]", "candidates: 1000000000000 is out of range [1, 10000]"),
+    ("gp-p", "samples = 0", "samples=0", "samples: 0 is out of range [1, 10000]",
+     "samples: 0 is out of range [1, 10000]"),
+    ("mean-shape", "angular_noise_deg = -1", "angular_noise_deg=-1", "angular_noise_deg: -1.0 is out of range "
+     "[0.0, 90.0]", "angular_noise_deg: -1.0 is out of range [0.0, 90.0]"),
+    ("gp-gpis-opt", "nu = nan", "nu=nan", "nu: expected a finite number, got nan",
+     "nu: expected a finite number, got 'nan'"),
+    ("gp-gpis-opt", "nu = inf", "nu=inf", "nu: expected a finite number, got inf",
+     "nu: expected a finite number, got 'inf'"),
+    ("gp-gpis-opt", "nu = 1e400", "nu=1e400", "nu: expected a finite number, got inf",
+     "nu: expected a finite number, got '1e400'"),
+    ("gp-gpis-opt", "nu = true", "nu=yes", "nu: expected a finite number, got true",
+     "nu: expected a finite number, got 'yes'"),
+    ("gp-gpis-opt", "temperature_deg = 0", "temperature_deg=0", "temperature_deg: 0.0 is out of range [0.1, 45.0]",
+     "temperature_deg: 0.0 is out of range [0.1, 45.0]"),
+    ("gp-gpis-opt", "quality = 3", "initialisations=1e3", "quality: expected a string, got 3",
+     "initialisations: expected an integer, got '1e3'"),
+]
+
+
+@pytest.mark.parametrize("planner, toml, text, in_config, on_command_line", BAD_PARAMETERS)
+def test_parameters_of_the_wrong_type_or_out_of_range_are_one_line(tmp_path, capsys, planner, toml, text, in_config,
+                                                                   on_command_line):
+    from harness.cli import main
+
+    config = _config(tmp_path, planner, toml)
+    assert main(["eval", config, "--out", str(tmp_path / "out")]) == 2
+    err = _one_line(capsys)
+    assert err == f"gpis-harness: error: {config}: planners[0].params.{in_config}", err
+    assert not (tmp_path / "out").exists()
+    assert main(["plan", "disk", "--planner", planner, "--param", text]) == 2
+    err = _one_line(capsys)
+    assert err == f"gpis-harness: error: --param: {on_command_line}", err
 
 
 def test_a_plugin_registered_by_entry_point_is_listed(tmp_path):

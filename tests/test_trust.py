@@ -178,6 +178,15 @@ def test_a_grasp_wider_than_the_opening_is_rejected_everywhere(tmp_path, capsys)
         assert "exceeds the gripper opening 0.1 m" in _one_line(capsys)
 
 
+def test_a_planner_calling_sys_exit_in_plan_is_an_outcome(tmp_path):
+    config = _config(tmp_path, ["disk"], planner="edge_planners:ExitsInPlan", params="")
+    out = tmp_path / "out"
+    assert main(["eval", str(config), "--out", str(out), "--workers", "1", "--no-report"]) == 0
+    with sqlite3.connect(out / "ledger.sqlite") as db:
+        assert db.execute("SELECT status, message FROM plans").fetchall() == [("raised", "SystemExit: 3")]
+        assert db.execute("SELECT count(*) FROM trials WHERE outcome = 'no_plan'").fetchone() == (3,)
+
+
 # -- 6. storage failures are one line; nothing recorded is lost -----------------------
 
 
