@@ -355,3 +355,18 @@ def test_a_symlink_planted_in_the_output_folder_is_replaced_not_followed(tmp_pat
     capsys.readouterr()
     assert main(["report", str(out)]) == 2
     assert "symbolic link" in _one_line(capsys)
+
+
+# -- 13. the house: physics sits below planners; figures know nothing of runs ---------
+
+
+@pytest.mark.parametrize(("modules", "forbidden"), [
+    (["harness.physics.bodies", "harness.physics.gripper", "harness.physics.trial", "harness.physics.simulate"],
+     ["planners", "harness.bench", "harness.experiment", "harness.tasks"]),
+    (["harness.plots"], ["harness.bench", "harness.experiment", "harness.tasks", "harness.config"]),
+])
+def test_layers_import_only_what_is_below_them(modules, forbidden):
+    probe = (f"import importlib, sys\nfor m in {modules!r}: importlib.import_module(m)\n"
+             f"print(sorted(m for m in sys.modules if any(m == f or m.startswith(f + '.') for f in {forbidden!r})))")
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, cwd=ROOT, check=True).stdout
+    assert out.strip() == "[]", out
