@@ -147,13 +147,19 @@ def test_a_lock_left_by_kill_9_does_not_block_the_resume(tmp_path):
 # -- 3. one width tolerance ---------------------------------------------------------
 
 
-def test_a_grasp_as_wide_as_the_opening_up_to_rounding_is_executed_everywhere(tmp_path, capsys):
-    config = _config(tmp_path, ["disk"], planner="edge_planners:WideByRounding", params="")
+def _evaluated(tmp_path: Path, planner: str) -> tuple[list, int]:
+    """Run the small experiment with ``planner`` on the disk: (status, executed) of its
+    plan, and how many of its trials are no_plan."""
+    config = _config(tmp_path, ["disk"], planner=planner, params="")
     out = tmp_path / "out"
     assert main(["eval", str(config), "--out", str(out), "--workers", "1", "--no-report"]) == 0
     with sqlite3.connect(out / "ledger.sqlite") as db:
-        assert db.execute("SELECT status, executed FROM plans").fetchall() == [("ok", 1)]
-        assert db.execute("SELECT count(*) FROM trials WHERE outcome = 'no_plan'").fetchone() == (0,)
+        return (db.execute("SELECT status, executed FROM plans").fetchall(),
+                db.execute("SELECT count(*) FROM trials WHERE outcome = 'no_plan'").fetchone()[0])
+
+
+def test_a_grasp_as_wide_as_the_opening_up_to_rounding_is_executed_everywhere(tmp_path, capsys):
+    assert _evaluated(tmp_path, "edge_planners:WideByRounding") == ([("ok", 1)], 0)
     capsys.readouterr()
     assert main(["plan", "disk", "--planner", "edge_planners:WideByRounding", "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["status"] == "ok"
@@ -163,11 +169,7 @@ def test_a_grasp_as_wide_as_the_opening_up_to_rounding_is_executed_everywhere(tm
 
 
 def test_a_grasp_wider_than_the_opening_is_rejected_everywhere(tmp_path, capsys):
-    config = _config(tmp_path, ["disk"], planner="edge_planners:WiderThanOpening", params="")
-    out = tmp_path / "out"
-    assert main(["eval", str(config), "--out", str(out), "--workers", "1", "--no-report"]) == 0
-    with sqlite3.connect(out / "ledger.sqlite") as db:
-        assert db.execute("SELECT status, executed FROM plans").fetchall() == [("invalid", 0)]
+    assert _evaluated(tmp_path, "edge_planners:WiderThanOpening") == ([("invalid", 0)], 3)
     capsys.readouterr()
     assert main(["plan", "disk", "--planner", "edge_planners:WiderThanOpening", "--json"]) == 0
     plan = json.loads(capsys.readouterr().out)
@@ -179,12 +181,9 @@ def test_a_grasp_wider_than_the_opening_is_rejected_everywhere(tmp_path, capsys)
 
 
 def test_a_planner_calling_sys_exit_in_plan_is_an_outcome(tmp_path):
-    config = _config(tmp_path, ["disk"], planner="edge_planners:ExitsInPlan", params="")
-    out = tmp_path / "out"
-    assert main(["eval", str(config), "--out", str(out), "--workers", "1", "--no-report"]) == 0
-    with sqlite3.connect(out / "ledger.sqlite") as db:
-        assert db.execute("SELECT status, message FROM plans").fetchall() == [("raised", "SystemExit: 3")]
-        assert db.execute("SELECT count(*) FROM trials WHERE outcome = 'no_plan'").fetchone() == (3,)
+    assert _evaluated(tmp_path, "edge_planners:ExitsInPlan") == ([("raised", 0)], 3)
+    with sqlite3.connect(tmp_path / "out" / "ledger.sqlite") as db:
+        assert db.execute("SELECT message FROM plans").fetchall() == [("SystemExit: 3",)]
 
 
 # -- 6. storage failures are one line; nothing recorded is lost -----------------------
