@@ -56,7 +56,8 @@ def reproducibility() -> dict:
     pinned package and those that differ from the constraints, the Python version, the
     BLAS libraries as threadpoolctl sees them in this process (API, version, kernels,
     threads; a cell limits them to CELL_BLAS_THREADS), numpy's active SIMD targets, the
-    code-path variables, the canonical grid and the platform (machine, C library, CPU)."""
+    code-path variables, the canonical grid and the platform (machine, C library, CPU).
+    JSON-ready, and in a stable order: two runs' records compare as dicts."""
     from threadpoolctl import threadpool_info
 
     for module in ("numpy", "scipy.linalg"):  # loaded, so that threadpoolctl sees their BLAS libraries
@@ -73,8 +74,7 @@ def reproducibility() -> dict:
         "constraints": {"file": CONSTRAINTS.name if pins else None,
                         "differ": {n: {"pinned": pins[n], "installed": packages[n]}
                                    for n in sorted(pins) if packages[n] != pins[n]}},
-        "blas": [{key: info.get(key) for key in ("internal_api", "version", "architecture", "num_threads", "prefix")}
-                 for info in threadpool_info() if info.get("user_api") == "blas"],
+        "blas": _blas(threadpool_info()),
         "cell_blas_threads": CELL_BLAS_THREADS,
         "numpy_simd": _numpy_simd(),
         "code_paths": {name: os.environ.get(name) for name in CODE_PATHS},
@@ -82,6 +82,13 @@ def reproducibility() -> dict:
         "platform": {"system": platform.system(), "machine": platform.machine(),
                      "libc": " ".join(platform.libc_ver()).strip() or None, "cpu": _cpu_model()},
     }
+
+
+def _blas(libraries: list[dict]) -> list[dict]:
+    """The BLAS libraries of threadpoolctl's list, sorted (its order follows the loader's)."""
+    keys = ("internal_api", "version", "architecture", "num_threads", "prefix")
+    found = [{key: lib.get(key) for key in keys} for lib in libraries if lib.get("user_api") == "blas"]
+    return sorted(found, key=lambda lib: (str(lib["prefix"]), str(lib["version"])))
 
 
 def _pins() -> dict:
