@@ -21,10 +21,6 @@ CONSTRAINTS = Path(__file__).resolve().parent.parent / "constraints.txt"
 #: between hosts in the last bits of a product or an exp, which the planners' optimisers
 #: and the single-precision shape sampler amplify to 1e-8 m (docs/experiments.md).
 CODE_PATHS = {"OPENBLAS_CORETYPE": "Haswell", "NPY_DISABLE_CPU_FEATURES": "X86_V4 AVX512_ICL AVX512_SPR"}
-#: BLAS threads inside a cell (harness.gpis.single_threaded_blas): a product's
-#: summation order can depend on how many threads share it.
-CELL_BLAS_THREADS = 1
-
 
 def pin_code_paths(environ=None) -> dict:
     """Set each CODE_PATHS variable that is not set already, on an x86-64 Linux CPU with
@@ -41,6 +37,7 @@ def pin_code_paths(environ=None) -> dict:
 
 
 def _has_avx2_and_fma() -> bool:
+    """Whether this is an x86-64 CPU with AVX2 and FMA (by /proc/cpuinfo; Linux only)."""
     if platform.machine().lower() not in ("x86_64", "amd64"):
         return False
     try:
@@ -55,7 +52,8 @@ def reproducibility() -> dict:
     """What the manifest records to reproduce a run: the installed version of every
     pinned package and those that differ from the constraints, the Python version, the
     BLAS libraries as threadpoolctl sees them in this process (API, version, kernels,
-    threads; a cell limits them to CELL_BLAS_THREADS), numpy's active SIMD targets, the
+    threads) and their threads inside a cell (a product's summation order can depend on
+    how many threads share it), numpy's active SIMD targets, the
     code-path variables, the canonical grid and the platform (machine, C library, CPU).
     JSON-ready, and in a stable order: two runs' records compare as dicts."""
     from threadpoolctl import threadpool_info
@@ -64,6 +62,7 @@ def reproducibility() -> dict:
         importlib.import_module(module)
 
     from harness.canonical import GRID
+    from harness.gpis import single_threaded_blas
 
     pins = _pins()
     names = sorted(pins) if pins else _requirements()
@@ -75,7 +74,7 @@ def reproducibility() -> dict:
                         "differ": {n: {"pinned": pins[n], "installed": packages[n]}
                                    for n in sorted(pins) if packages[n] != pins[n]}},
         "blas": _blas(threadpool_info()),
-        "cell_blas_threads": CELL_BLAS_THREADS,
+        "cell_blas_threads": _cell_blas_threads(single_threaded_blas, threadpool_info),
         "numpy_simd": _numpy_simd(),
         "code_paths": {name: os.environ.get(name) for name in CODE_PATHS},
         "canonical_grid_m": GRID,
@@ -89,6 +88,12 @@ def _blas(libraries: list[dict]) -> list[dict]:
     keys = ("internal_api", "version", "architecture", "num_threads", "prefix")
     found = [{key: lib.get(key) for key in keys} for lib in libraries if lib.get("user_api") == "blas"]
     return sorted(found, key=lambda lib: (str(lib["prefix"]), str(lib["version"])))
+
+
+def _cell_blas_threads(limit, threadpool_info) -> list[int]:
+    """The BLAS thread counts under a cell's limit (harness.experiment.run_cell)."""
+    with limit():
+        return sorted({lib["num_threads"] for lib in _blas(threadpool_info())})
 
 
 def _pins() -> dict:
