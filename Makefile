@@ -8,7 +8,10 @@ STAMP := $(VENV)/.installed
 
 setup: $(STAMP)
 
-# Reinstall only when the package metadata changed (editable install covers code).
+# Reinstall only when the package metadata or the constraints changed (editable install
+# covers code). constraints.txt pins every package to the exact version that made
+# results/reference (pyproject.toml's ranges say what is compatible, the constraints what
+# is reproduced), for uv itself too; both installers honour it.
 # uv (from PyPI, into the venv) installs the dependencies in seconds where pip takes
 # about a minute; if uv cannot be installed or fails (a network only pip is configured
 # for, say), pip does the same install. The bytecode is compiled at install time, so no
@@ -17,13 +20,13 @@ setup: $(STAMP)
 # compileall skips what no process here imports (the libraries' own test suites, pip,
 # setuptools, pybullet's example environments): 12 s instead of 22 s for everything.
 NOCOMPILE := /(tests?|pip|setuptools|pybullet_envs|pybullet_examples|pybullet_robots|pybullet_utils)/
-$(STAMP): pyproject.toml
+$(STAMP): pyproject.toml constraints.txt
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
-	{ $(BIN)/python -m pip install --quiet 'uv>=0.5,<1' \
-	  && $(BIN)/python -m uv pip install --quiet --python $(BIN)/python -e '.[dev,cluster]' \
+	{ $(BIN)/python -m pip install --quiet -c constraints.txt 'uv>=0.5,<1' \
+	  && $(BIN)/python -m uv pip install --quiet --python $(BIN)/python -c constraints.txt -e '.[dev,cluster]' \
 	  && { $(BIN)/python -m compileall -q -j 0 -x '$(NOCOMPILE)' $(VENV)/lib > /dev/null || true; }; } \
 	|| { $(BIN)/python -m pip install --quiet --upgrade pip \
-	  && $(BIN)/python -m pip install --quiet -e '.[dev,cluster]'; }
+	  && $(BIN)/python -m pip install --quiet -c constraints.txt -e '.[dev,cluster]'; }
 	touch $(STAMP)
 
 eval: setup

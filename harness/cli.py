@@ -456,7 +456,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of ``gpis-harness``; returns the exit code."""
+    """Entry point of ``gpis-harness``; returns the exit code. Pins the numeric code
+    paths first (harness.provenance), before anything loads numpy."""
+    from harness.provenance import pin_code_paths
+
+    pin_code_paths()
     try:
         args = build_parser().parse_args(argv)
         return int(args.func(args) or 0)

@@ -12,6 +12,8 @@ def environment() -> dict:
     import sys
     from importlib.metadata import PackageNotFoundError, version
 
+    from harness.provenance import reproducibility
+
     versions = {}
     for pkg in ("gpis-harness", "numpy", "scipy", "osqp", "pandas", "pybullet", "shapely", "matplotlib"):
         try:
@@ -28,4 +30,4 @@ def environment() -> dict:
         commit, dirty = None, None
     return {"python": sys.version.split()[0], "packages": versions, "git_commit": commit, "git_dirty": dirty,
             "machine": {"platform": platform.platform(), "processor": platform.machine(),
-                        "cpus": __import__("os").cpu_count()}}
+                        "cpus": __import__("os").cpu_count()}, "reproducibility": reproducibility()}

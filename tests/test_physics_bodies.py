@@ -11,8 +11,10 @@ import shapely.affinity
 from shapely.geometry import box
 
 from harness.belief import build_belief
+from harness.canonical import canonical
 from harness.geometry import inside_region, largest_region
-from harness.physics.bodies import convex_pieces, create_body, field_polygon, prism_mass_properties
+from harness.physics.bodies import (convex_pieces, create_body, field_polygon, principal_frame,
+                                    prism_mass_properties)
 from harness.physics.simulate import make_trials, truth_polygon
 from harness.settings import resolve
 from harness.physics.trial import Runner
@@ -50,6 +52,40 @@ def test_prism_mass_properties_match_the_box_closed_form():
     np.testing.assert_allclose(np.diag(props.inertia), [m * (b * b + t * t) / 12, m * (a * a + t * t) / 12,
                                                         m * (a * a + b * b) / 12], rtol=1e-10)
     assert abs(props.inertia[0, 1]) < 1e-15 * m
+
+
+def _rotation(q) -> np.ndarray:
+    return np.array(pb.getMatrixFromQuaternion(q)).reshape(3, 3)
+
+
+@pytest.mark.parametrize("name", ["tape", "stapler", "plane", "marker", "disk", "rectangle"])
+def test_the_closed_form_principal_frame_diagonalises_the_inertia(name):
+    props = prism_mass_properties(truth_polygon(load_scene(name)), 0.03, 700.0)
+    moments, quaternion = principal_frame(props.inertia)
+    r = _rotation(quaternion)
+    assert np.linalg.norm(quaternion) == pytest.approx(1.0, abs=1e-15)
+    np.testing.assert_allclose(r @ np.diag(moments) @ r.T, props.inertia, rtol=0, atol=1e-12 * max(moments))
+    np.testing.assert_allclose(sorted(moments), np.linalg.eigvalsh(props.inertia), rtol=1e-12)
+
+
+@pytest.mark.parametrize("inertia", [np.diag([2.0, 1.0, 3.0]), np.diag([1.0, 2.0, 3.0]), np.diag([1.0, 1.0, 2.0]),
+                                     np.array([[1.0, 0.5, 0.0], [0.5, 1.0, 0.0], [0.0, 0.0, 2.0]])])
+def test_the_principal_frame_of_special_tensors(inertia):
+    # Axis-aligned either way round, a round outline's equal moments, 45 degrees.
+    moments, quaternion = principal_frame(inertia)
+    r = _rotation(quaternion)
+    np.testing.assert_allclose(r @ np.diag(moments) @ r.T, inertia, atol=1e-15)
+
+
+def test_outlines_for_the_physics_are_canonical():
+    scene = load_scene("marker")
+    belief = build_belief(scene, stream(0, "marker", 0, "sensor"))
+    polygons = [truth_polygon(scene)] + [field_polygon(f, scene.grid)
+                                         for f in belief.sample(5, stream(0, "test-physics")).values]
+    for polygon in polygons:
+        xy = shapely.get_coordinates(polygon)
+        assert len(xy) > 4 and polygon.is_valid
+        np.testing.assert_array_equal(xy, canonical(xy))
 
 
 @pytest.mark.parametrize("name", ["tape", "stapler", "can_opener", "plane"])

@@ -5,6 +5,7 @@ extruded prism, and the pybullet multibody."""
 from __future__ import annotations
 
 import hashlib
+import math
 import os
 import tempfile
 from dataclasses import dataclass
@@ -16,6 +17,7 @@ import pybullet as pb
 import shapely
 from shapely.geometry import Polygon
 
+from harness.canonical import canonical_polygon
 from harness.geometry import Grid, inside_region, largest_region, polygons
 
 #: Simplification tolerance, in cells: a quarter cell moves the outline far less than
@@ -26,10 +28,19 @@ SIMPLIFY_CELLS = 0.25
 def field_polygon(field: np.ndarray, grid: Grid) -> Polygon:
     """The largest connected region inside the zero level of ``field`` (sub-cell marching
     squares), holes kept, simplified within a quarter cell; empty if there is none."""
-    region = largest_region(inside_region(field, grid))
+    return simplified_outline(largest_region(inside_region(field, grid)), grid.cell)
+
+
+def simplified_outline(region: Polygon, cell: float) -> Polygon:
+    """A region's outline for the physics: its vertices canonical (harness.canonical),
+    then simplified within SIMPLIFY_CELLS cells, its largest part. Rounding first makes
+    the simplification decide on the same numbers on every host; it keeps a subset of
+    the vertices, so the result stays canonical (unless rounding would have made the
+    region invalid; see :func:`~harness.canonical.canonical_polygon`)."""
     if region.is_empty:
         return region
-    simple = region.simplify(SIMPLIFY_CELLS * grid.cell, preserve_topology=True)
+    region = canonical_polygon(region)
+    simple = region.simplify(SIMPLIFY_CELLS * cell, preserve_topology=True)
     return largest_region(simple) if not simple.is_empty else region
 
 
@@ -227,13 +238,11 @@ def _recipe(polygon: Polygon, thickness: float, density: float, decompose) -> _R
     pieces = tuple(decompose(polygon))
     mesh = _compound_text([_core(piece, thickness) for piece in pieces], thickness)
     props = prism_mass_properties(polygon, thickness, density)
-    moments, axes = np.linalg.eigh(props.inertia)
-    if np.linalg.det(axes) < 0:
-        axes[:, 0] *= -1
+    moments, axes = principal_frame(props.inertia)
     hull, margin = _core(polygon.convex_hull, thickness)
     z0 = min(margin, 0.25 * thickness)
     foot = _prism_vertices(hull, z0, z0 + min(FOOT_HEIGHT, thickness - 2 * z0))
-    return _Recipe(pieces, mesh, props, moments.tolist(), _quaternion(axes), foot)
+    return _Recipe(pieces, mesh, props, moments, axes, foot)
 
 
 def _compound_text(cores: list, thickness: float) -> str:
@@ -295,11 +304,25 @@ def _prism_triangles(n: int) -> list[int]:
     return tris
 
 
-def _quaternion(r: np.ndarray) -> list:
-    """Unit quaternion (x, y, z, w) of a rotation matrix."""
-    w = np.sqrt(max(0.0, 1 + r[0, 0] + r[1, 1] + r[2, 2])) / 2
-    x = np.copysign(np.sqrt(max(0.0, 1 + r[0, 0] - r[1, 1] - r[2, 2])) / 2, r[2, 1] - r[1, 2])
-    y = np.copysign(np.sqrt(max(0.0, 1 - r[0, 0] + r[1, 1] - r[2, 2])) / 2, r[0, 2] - r[2, 0])
-    z = np.copysign(np.sqrt(max(0.0, 1 - r[0, 0] - r[1, 1] + r[2, 2])) / 2, r[1, 0] - r[0, 1])
-    q = np.array([x, y, z, w])
-    return (q / np.linalg.norm(q)).tolist()
+def principal_frame(inertia: np.ndarray) -> tuple[list, list]:
+    """The principal moments of a prism's inertia tensor and the rotation (a quaternion
+    x, y, z, w) whose columns are their axes. The prism's z axis is principal, so the
+    rotation is the turn about z, within 45 degrees, that diagonalises the tensor's x-y
+    block, found in closed form with square roots and divisions only: LAPACK's
+    eigenvectors would depend on the host's BLAS kernels in their last bits, in their
+    signs, and (for a round outline, whose two in-plane moments agree) in direction."""
+    a, b, c = float(inertia[0, 0]), float(inertia[0, 1]), float(inertia[1, 1])
+    half_gap = 0.5 * (a - c)
+    radius = math.sqrt(half_gap * half_gap + b * b)
+    mean = 0.5 * (a + c)
+    if radius == 0.0:
+        return [a, c, float(inertia[2, 2])], [0.0, 0.0, 0.0, 1.0]
+    # The first axis turned by t from x, |t| <= pi/4: cos 2t = |half_gap| / radius and
+    # sin 2t = sign * b / radius, its moment mean + sign * radius; the quaternion of a
+    # turn t about z is (0, 0, sin t/2, cos t/2). No cosine below 1/sqrt(2): no cancellation.
+    sign = 1.0 if half_gap >= 0.0 else -1.0
+    cos_t = math.sqrt(0.5 * (1.0 + abs(half_gap) / radius))
+    sin_t = sign * b / radius / (2.0 * cos_t)
+    cos_half = math.sqrt(0.5 * (1.0 + cos_t))
+    return ([mean + sign * radius, mean - sign * radius, float(inertia[2, 2])],
+            [0.0, 0.0, sin_t / (2.0 * cos_half), cos_half])

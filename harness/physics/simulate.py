@@ -17,8 +17,9 @@ import numpy as np
 from shapely.geometry import Polygon
 
 from harness.belief import Belief
+from harness.canonical import canonical
 from harness.geometry import largest_region
-from harness.physics.bodies import SIMPLIFY_CELLS, field_polygon
+from harness.physics.bodies import field_polygon, simplified_outline
 from harness.physics.gripper import GripperAdapter, GripperSpec
 from harness.physics.trial import OUTCOMES, Trial
 from harness.quality import as_starts, executed_starts, wilson_interval
@@ -29,10 +30,8 @@ SHAPE_SOURCES = ("truth", "posterior")
 
 
 def truth_polygon(scene: Scene) -> Polygon:
-    """The true shape's largest region, simplified like a sample's (a quarter cell)."""
-    region = largest_region(scene.shape)
-    simple = region.simplify(SIMPLIFY_CELLS * scene.grid.cell, preserve_topology=True)
-    return largest_region(simple) if not simple.is_empty else region
+    """The true shape's largest region, canonical and simplified like a sample's."""
+    return simplified_outline(largest_region(scene.shape), scene.grid.cell)
 
 
 def sample_polygons(belief: Belief, n: int, rng: np.random.Generator) -> list[Polygon]:
@@ -46,14 +45,21 @@ def make_trials(settings: GraspSettings, grasp, polygons: list[Polygon], approac
     """Trial i: ``polygons[i]`` (or the one polygon for all) extruded with the settings'
     thickness and density, the grasp executed under ``approach[i]`` (standard-normal
     deviates (n, 2, 2) for g1 and g2), jaw-object friction from ``friction_deviates[i]``
-    (the settings' friction when None), the settings' gripper unless ``gripper`` is given."""
-    planned = as_starts(grasp)[0]
+    (the settings' friction when None), the settings' gripper unless ``gripper`` is given.
+
+    The planned jaw starts are made canonical (harness.canonical) first: a plan that
+    differs between hosts by much less than the grid executes the same. What follows
+    them to Bullet (the executed starts, the closing direction, the friction) is computed
+    elementwise from them and the deviates, without BLAS, so the same on every host; the
+    polygons come canonical from :func:`truth_polygon` and
+    :func:`~harness.physics.bodies.field_polygon`."""
+    planned = canonical(as_starts(grasp)[0])
     n = len(approach)
     frictions = np.broadcast_to(settings.frictions(0.0 if friction_deviates is None else friction_deviates), (n,))
     if len(polygons) not in (1, n):
         raise ValueError("one polygon, or one per approach draw")
     g1, g2 = executed_starts(planned, approach, settings)
-    nominal = (planned[1] - planned[0]) / np.linalg.norm(planned[1] - planned[0])
+    nominal = (planned[1] - planned[0]) / np.hypot(*(planned[1] - planned[0]))
     gripper = gripper or GripperSpec.from_settings(settings).adapter()
     trials = []
     for i in range(n):

@@ -142,14 +142,20 @@ def free_travel(trial: Trial) -> float:
     u = np.asarray(trial.axis, dtype=float)
     v = np.array([-u[1], u[0]])
     g1, g2 = np.asarray(trial.g1, dtype=float), np.asarray(trial.g2, dtype=float)
-    width = float(np.dot(g2 - g1, u))
+    width = float(_along(g2 - g1, u))
     half = 0.5 * trial.gripper.pad_width
     strip = Polygon([g1 - half * v, g2 - half * v, g2 + half * v, g1 + half * v])
     between = shapely.intersection(strip, trial.polygon)
     if between.is_empty or between.area <= 0.0:
         return math.inf
-    along = np.asarray(shapely.get_coordinates(between)) @ u - float(np.dot(g1, u))
+    along = _along(shapely.get_coordinates(between), u) - float(_along(g1, u))
     return max(0.0, min(float(along.min()), width - float(along.max())))
+
+
+def _along(points: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """Coordinates of points (..., 2) along u, elementwise: a BLAS dot product's last
+    bits depend on the host's kernel, and these numbers reach Bullet."""
+    return points[..., 0] * u[0] + points[..., 1] * u[1]
 
 
 class Runner:
@@ -312,7 +318,7 @@ class _Slot:
             pb.changeDynamics(self.obj, link, frictionAnchor=int(p.friction_anchor), physicsClientId=c)
         g1, g2 = np.asarray(t.g1), np.asarray(t.g2)
         centre = 0.5 * (g1 + g2)
-        width = float(np.linalg.norm(g2 - g1))
+        width = math.dist(t.g1, t.g2)  # not np.linalg.norm: a BLAS dot product (see _along)
         heading = math.atan2(t.axis[1], t.axis[0]) - math.atan2(g.closing_axis[1], g.closing_axis[0])
         self.centre = (centre[0] + ox, centre[1] + oy)
         self.heading = heading
