@@ -22,6 +22,7 @@ CONSTRAINTS = Path(__file__).resolve().parent.parent / "constraints.txt"
 #: and the single-precision shape sampler amplify to 1e-8 m (docs/experiments.md).
 CODE_PATHS = {"OPENBLAS_CORETYPE": "Haswell", "NPY_DISABLE_CPU_FEATURES": "X86_V4 AVX512_ICL AVX512_SPR"}
 
+
 def pin_code_paths(environ=None) -> dict:
     """Set each CODE_PATHS variable that is not set already, on an x86-64 Linux CPU with
     AVX2 and FMA (forcing Haswell kernels on a CPU without them would crash); elsewhere
