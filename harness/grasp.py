@@ -132,6 +132,16 @@ class SDFBatch:
         out.grid, out.values, out.gx, out.gy = self.grid, self.values[:n], self.gx[:n], self.gy[:n]
         return out
 
+    @classmethod
+    def of_parts(cls, grid: Grid, values: np.ndarray, gx: np.ndarray, gy: np.ndarray, twist: np.ndarray,
+                 regions: "Regions") -> "SDFBatch":
+        """A batch over float32 arrays (F, M, M) used as they are (no copies), with its
+        derived fields (the twist, the regions) computed elsewhere, e.g. part by part."""
+        out = object.__new__(cls)
+        out.grid, out.values, out.gx, out.gy = grid, values, gx, gy
+        out.__dict__.update(twist=twist, regions=regions)  # the cached properties' slots
+        return out
+
     @cached_property
     def twist(self) -> np.ndarray:
         """Cross derivative d2f/dxdy (F, M, M): the average of d(df/dx)/dy and
