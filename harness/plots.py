@@ -262,3 +262,46 @@ def runtime_figure(bench: dict):
     ax.legend(fontsize=8)
     ax.set_title("Runtime against grid size (bench planning)", fontsize=10)
     return fig
+
+
+#: Colours of the bandit policies in the study's figure.
+POLICY_COLOURS = {"thompson": "tab:red", "gittins": "tab:purple", "ucb": "tab:orange", "uniform": "tab:blue",
+                  "pruning": "tab:green"}
+
+
+def bandit_figure(study: dict):
+    """Like Laskey et al.'s convergence plots (from the bandit study of ``bench planning``
+    or ``bench bandit``): the P_F of each policy's best grasp so far, as a fraction of the
+    best candidate's (gp-p's choice), against the draws spent and against the seconds;
+    the median over the study's runs, with the 1 % and 3 % lines."""
+    runs = [r for r in study.get("runs", []) if "skipped" not in r and r.get("target", 0) > 0]
+    fig, axes = plt.subplots(1, 2, figsize=(11.0, 4.2), constrained_layout=True)
+    policies = [p for p in POLICY_COLOURS if runs and all(p in r["curves"] for r in runs)]
+    for ax, column, label in ((axes[0], 0, "draws spent (pulls)"), (axes[1], 1, "planning time (s)")):
+        ends = [r["curves"][p][-1][column] for r in runs for p in policies]
+        starts = [r["curves"][p][0][column] for r in runs for p in policies]
+        if not ends:
+            continue
+        grid = np.geomspace(max(min(starts), 1e-4), max(ends), 200)
+        for policy in policies:
+            fractions = np.empty((len(runs), len(grid)))
+            for k, r in enumerate(runs):
+                curve = np.asarray(r["curves"][policy], dtype=float)
+                # A step function: each round's answer stands until the next (and after the last).
+                at = np.searchsorted(curve[:, column], grid, side="right") - 1
+                fractions[k] = np.where(at >= 0, curve[np.maximum(at, 0), 2] / r["target"], np.nan)
+            started = np.isfinite(fractions).all(axis=0)  # the median once every run has an answer
+            median = np.full(len(grid), np.nan)
+            median[started] = np.median(fractions[:, started], axis=0)
+            ax.step(grid, median, where="post", color=POLICY_COLOURS[policy], label=policy)
+        for level, style in ((0.99, ":"), (0.97, "--")):
+            ax.axhline(level, color="0.5", ls=style, lw=1)
+        ax.set_xscale("log")
+        ax.set_xlabel(label)
+        ax.set_ylim(0.8, 1.01)
+    axes[0].set_ylabel("P_F of the best grasp so far / best candidate's")
+    axes[0].legend(fontsize=8, loc="lower right", title="policy (median of runs)", title_fontsize=8)
+    axes[1].set_title("dotted: within 1 %, dashed: within 3 %", fontsize=9)
+    fig.suptitle(f"Bandit allocation of draws (bench planning): {len(runs)} runs, "
+                 f"{len(study.get('scenes', []))} scenes x {study.get('seeds', '?')} seeds", fontsize=10)
+    return fig

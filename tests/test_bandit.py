@@ -1,8 +1,8 @@
-"""The bandit planner (planners/gp_bandit.py) and its allocation (planners/allocation.py):
-the Beta-Bernoulli update, the Gittins table against a second formulation and the
-published value, every policy on synthetic bandits with known means, gp-p's scores and
-choice reproduced by uniform allocation on the same draws, determinism, the conformance
-kit and an experiment."""
+"""The bandit planner (planners/gp_bandit.py), its allocation (planners/allocation.py) and
+its study (harness/bench/bandit_study.py): the Beta-Bernoulli update, the Gittins table
+against a second formulation and the published value, every policy on synthetic bandits
+with known means, gp-p's scores and choice reproduced by uniform allocation on the same
+draws, determinism, the conformance kit, an experiment, and the study's measures."""
 
 from __future__ import annotations
 
@@ -280,3 +280,45 @@ def test_the_bandit_runs_in_an_experiment(tmp_path):
     summary = pd.read_csv(out / "summary.csv")
     row = summary[(summary.scene == "disk") & (summary.planner == "gp-bandit-ucb")].iloc[0]
     assert row.plans_ok == "1/1" and row.p_f > 0.9 and row.n_trials == 2  # the posterior trials
+
+
+# -- the study ---------------------------------------------------------------------------------
+
+
+def test_a_target_is_reached_where_the_curve_stays_within_it_to_the_end():
+    from harness.bench.bandit_study import reached
+
+    curve = [(20, 0.1, 0.90), (40, 0.2, 0.99), (60, 0.3, 0.95), (80, 0.4, 0.98), (100, 0.5, 1.0)]
+    assert reached(curve, 1.0, 0.03) == (80, 0.4)
+    assert reached(curve, 1.0, 0.01) == (100, 0.5)
+    assert reached(curve, 1.0, 0.001) == (100, 0.5)
+    assert reached(curve[:3], 1.0, 0.03) == (None, None)
+
+
+def test_a_tiny_study_measures_every_policy_and_draws_its_figure(tmp_path):
+    from harness import plots
+    from harness.bench import bandit_study
+
+    runs = [bandit_study.run("disk", 0, candidates=12, samples=60, budget=300, defaults=False)]
+    for r in runs:
+        assert r["uniform_is_gp_p"] and set(r["curves"]) == set(POLICIES)
+        assert r["curves"]["uniform"][-1][0] == 12 * 60 and r["curves"]["thompson"][-1][0] == 300
+        assert r["curves"]["uniform"][-1][2] == r["target"]  # uniform ends on gp-p's choice
+    summary = bandit_study.summarise(runs)
+    assert summary["uniform_is_gp_p"] == 1 and summary["policies"]["uniform"]["3pct"]["reached"] == 1
+    assert summary["policies"]["uniform"]["3pct"]["median_uniform_over_policy_draws"] == 1.0
+    fig = plots.bandit_figure({"runs": runs, "scenes": ["disk"], "seeds": 1})
+    fig.savefig(tmp_path / "bandit.png")
+    assert (tmp_path / "bandit.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_the_study_refuses_unknown_scenes_before_any_work(capsys):
+    from harness.cli import main
+
+    for argv in (["bench", "bandit", "--scenes", "disk,no_such_scene"], ["bench", "bandit", "--seeds", "-1"],
+                 ["bench", "bandit", "--scenes", "shared_no_such_outline"]):
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert len(err.strip().splitlines()) == 1 and err.startswith("gpis-harness: error: "), (argv, err)
+    assert main(["bench", "bandit", "--seeds", "0", "--scenes", "disk", "--json"]) == 0
+    assert '"summary": null' in capsys.readouterr().out
