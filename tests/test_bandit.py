@@ -101,8 +101,9 @@ def test_a_fresh_arm_at_discount_0_9_has_the_published_gittins_index():
     assert restart_index(1, 1, 0.9) == pytest.approx(0.7029, abs=5e-5)
 
 
-@pytest.mark.parametrize("discount, states", [(0.9, [(0, 0), (1, 1), (3, 0), (7, 5), (20, 19), (40, 8), (100, 97)]),
-                                              (0.95, [(2, 1), (60, 55)])])
+@pytest.mark.parametrize("discount, states", [(0.9, [(0, 0), (1, 1), (3, 0), (7, 5), (20, 19), (40, 8), (100, 0),
+                                                     (100, 50), (100, 97), (100, 100)]),
+                                              (0.95, [(2, 1), (60, 55), (100, 99)])])
 def test_the_gittins_table_agrees_with_the_restart_formulation(discount, states):
     table = gittins_table(discount)
     for n, s in states:
