@@ -217,10 +217,10 @@ def find_contacts(fields: SDFBatch, g1, g2, jaw_width: float, field_index=None,
     action; ``plate_lines`` parallel lines across it are marched from g1 to g2 in steps
     of at most MARCH_STEP_CELLS with bilinear interpolation, each grasp in as many equal
     steps as its own length needs (so a grasp's contacts do not depend on the other
-    grasps in the batch). Jaw 1's contact is the first
-    outside-to-inside crossing from g1 over all lines, jaw 2's the first from g2 (the
-    same lines, marched once). Crossings are refined by Newton steps on the bicubic
-    interpolant, and the normal is that interpolant's normalised gradient.
+    grasps in the batch). Jaw 1's contact is the first outside-to-inside crossing from g1
+    over all lines, jaw 2's the first from g2 (the same lines, marched once). Crossings
+    are refined by Newton steps on the bicubic interpolant, and the normal is that
+    interpolant's normalised gradient.
     """
     g1 = np.atleast_2d(np.asarray(g1, dtype=float))
     g2 = np.atleast_2d(np.asarray(g2, dtype=float))

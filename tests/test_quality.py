@@ -84,15 +84,15 @@ def test_pairs_of_grasps_and_draws_are_judged_as_on_the_full_grid(rectangle):
     assert (~grid.closure).any() and grid.closure.any()
 
 
-def test_a_draw_pool_holds_the_same_draws_as_draw_evaluation():
-    """On the marker, 250 draws come block by block (the weight-space sampler) and 120 at
-    once (pathwise, whose stream depends on the split): either way the pool's draws are
+def test_a_draw_pool_holds_the_same_draws_as_draw_evaluation(rectangle):
+    """On the rectangle, 250 draws come block by block (the weight-space sampler) and 120
+    at once (pathwise, whose stream depends on the split): either way the pool's draws are
     draw_evaluation's, bit for bit, and only the blocks asked for are drawn."""
-    belief = build_belief(load_scene("marker"), stream(0, "marker", 0, "sensor"))
+    belief, _ = rectangle
     for n, sampler in ((250, "weight-space"), (120, "pathwise")):
         assert belief.sampler(n) == sampler
-        whole = draw_evaluation(belief, n, *default_streams(3, "marker"))
-        pool = DrawPool(belief, n, *default_streams(3, "marker"))
+        whole = draw_evaluation(belief, n, *default_streams(3, "rectangle"))
+        pool = DrawPool(belief, n, *default_streams(3, "rectangle"))
         first = pool.draws(30)
         assert len(first) == (POOL_BLOCK if sampler == "weight-space" else n) and pool.drawn == len(first)
         full = pool.draws(n)
