@@ -123,6 +123,12 @@ class Belief:
         values, gradients = self.gp.sample_grid(c, c, n, rng, method=method)
         return ShapeSamples(values, gradients)
 
+    def sampler(self, n: int) -> str:
+        """The exact sampler ``sample(n, rng)`` uses: "pathwise" or "weight-space" (see
+        GPIS.grid_strategy)."""
+        c = self.grid.coords
+        return self.gp.grid_strategy(c, c, n)
+
 
 def make_gp(scene: Scene) -> GPIS:
     """The scene's GPIS, unfitted, with ML-II bounds scaled to its grid."""

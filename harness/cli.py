@@ -54,6 +54,9 @@ _non_negative = _checked(float, lambda v: math.isfinite(v) and v >= 0, "a finite
 _coordinate = _checked(float, math.isfinite, "a finite coordinate in metres")
 _sizes = _checked(lambda t: [int(v) for v in t.split(",")], lambda v: len(v) > 0,
                   "comma-separated integers like 25,40,55")
+_study_seeds = _checked(int, lambda v: 0 <= v <= 1000, "an integer from 0 to 1000")
+_names = _checked(lambda t: [v.strip() for v in t.split(",")], lambda v: all(v),
+                  "comma-separated scene names like disk,tape")
 
 
 def _scenes_list(args) -> int:
@@ -339,7 +342,8 @@ def _plan(args) -> int:
 def _bench(args) -> int:
     from harness import bench
 
-    results = bench.run(args.which, exact_max_mb=args.exact_max_mb, sizes=args.sizes)
+    results = bench.run(args.which, exact_max_mb=args.exact_max_mb, sizes=args.sizes, seeds=args.seeds,
+                        scenes=args.scenes)
     if args.json:
         print(json.dumps(results, indent=2))
     else:
@@ -444,13 +448,19 @@ def build_parser() -> argparse.ArgumentParser:
 
     bench = sub.add_parser("bench", help="benchmarks, measured as ratios in one run")
     bench.add_argument("which", nargs="?", default="all",
-                       choices=["sampling", "planning", "quality", "physics", "lift", "all"])
+                       choices=["sampling", "planning", "quality", "physics", "lift", "bandit", "all"])
     bench.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     bench.add_argument("--exact-max-mb", type=float, default=2500.0,
                        help="skip the dense exact sampler when its covariance exceeds this (default 2500)")
     bench.add_argument("--sizes", type=_sizes, default=None,
                        help="grid sizes M, comma-separated (defaults: sampling 25,40,55,70,100,200; "
                             "planning 25,50,100,200)")
+    bench.add_argument("--seeds", type=_study_seeds, default=None,
+                       help="seeds per scene of the bandit convergence study (bench bandit, part of bench "
+                            "planning; default 3; 0 skips the study)")
+    bench.add_argument("--scenes", type=_names, default=None,
+                       help="the bandit study's scenes, comma-separated: library names or shared_<outline> "
+                            "(default: the library and every outline in ../shared/objects)")
     bench.set_defaults(func=_bench)
     return parser
 

@@ -330,7 +330,7 @@ class GPIS:
         planes = np.empty((n, 2, len(ys), len(xs)))
         on_grid = self._grid_index(xs, ys)
         if method == "fast":
-            method = self.fast_strategy(len(xs), len(ys), bx.rank, by.rank, on_grid is not None, n)
+            method = self.grid_strategy(xs, ys, n)
         if method == "pathwise":
             if on_grid is None:
                 raise ValueError("method 'pathwise' needs every observation on the grid")
@@ -421,6 +421,15 @@ class GPIS:
             outer = lambda a, b: (a[:, :, None] * b[:, None, :]).reshape(len(a), -1)  # noqa: E731
             self._cache[key] = np.concatenate([outer(fy, fx), outer(fy[g], dfx[g]), outer(dfy[g], fx[g])])
         return self._cache[key]
+
+    def grid_strategy(self, xs, ys, n: int) -> str:
+        """The sampler that :meth:`sample_grid`'s ``fast`` uses for n draws on the grid ys x xs:
+        "pathwise" or "weight-space". Weight-space draws come sample by sample from the
+        stream, so n draws made in several calls (with that method named) equal one
+        call's; pathwise draws interleave their prior and noise draws by chunk."""
+        xs, ys = np.asarray(xs, dtype=float), np.asarray(ys, dtype=float)
+        bx, by = self._basis(0, xs), self._basis(1, ys)
+        return self.fast_strategy(len(xs), len(ys), bx.rank, by.rank, self._grid_index(xs, ys) is not None, n)
 
     def fast_strategy(self, nx: int, ny: int, rx: int, ry: int, on_grid: bool, n: int) -> str:
         """The cheaper exact sampler for n draws on an nx x ny grid: 'pathwise' or

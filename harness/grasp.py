@@ -132,6 +132,16 @@ class SDFBatch:
         out.grid, out.values, out.gx, out.gy = self.grid, self.values[:n], self.gx[:n], self.gy[:n]
         return out
 
+    @classmethod
+    def of_parts(cls, grid: Grid, values: np.ndarray, gx: np.ndarray, gy: np.ndarray, twist: np.ndarray,
+                 regions: "Regions") -> "SDFBatch":
+        """A batch over float32 arrays (F, M, M) used as they are (no copies), with its
+        derived fields (the twist, the regions) computed elsewhere, e.g. part by part."""
+        out = object.__new__(cls)
+        out.grid, out.values, out.gx, out.gy = grid, values, gx, gy
+        out.__dict__.update(twist=twist, regions=regions)  # the cached properties' slots
+        return out
+
     @cached_property
     def twist(self) -> np.ndarray:
         """Cross derivative d2f/dxdy (F, M, M): the average of d(df/dx)/dy and
@@ -205,10 +215,12 @@ def find_contacts(fields: SDFBatch, g1, g2, jaw_width: float, field_index=None,
     Grasp b is evaluated on field ``field_index[b]`` (default: field b when there are B
     fields, else field 0). Each jaw is a plate of width ``jaw_width`` across the line of
     action; ``plate_lines`` parallel lines across it are marched from g1 to g2 in steps
-    of MARCH_STEP_CELLS with bilinear interpolation. Jaw 1's contact is the first
-    outside-to-inside crossing from g1 over all lines, jaw 2's the first from g2 (the
-    same lines, marched once). Crossings are refined by Newton steps on the bicubic
-    interpolant, and the normal is that interpolant's normalised gradient.
+    of at most MARCH_STEP_CELLS with bilinear interpolation, each grasp in as many equal
+    steps as its own length needs (so a grasp's contacts do not depend on the other
+    grasps in the batch). Jaw 1's contact is the first outside-to-inside crossing from g1
+    over all lines, jaw 2's the first from g2 (the same lines, marched once). Crossings
+    are refined by Newton steps on the bicubic interpolant, and the normal is that
+    interpolant's normalised gradient.
     """
     g1 = np.atleast_2d(np.asarray(g1, dtype=float))
     g2 = np.atleast_2d(np.asarray(g2, dtype=float))
@@ -218,18 +230,24 @@ def find_contacts(fields: SDFBatch, g1, g2, jaw_width: float, field_index=None,
     field_index = np.broadcast_to(np.asarray(field_index, dtype=np.int64), (b,))
     out = Contacts(*(np.full((b, 2), np.nan) for _ in range(4)), np.empty(b, dtype=np.int8),
                    np.full(b, np.nan), np.full(b, np.nan), *(np.full((b, plate_lines, 2), np.nan) for _ in range(2)))
-    steps = max(2, int(math.ceil(np.max(np.linalg.norm(g2 - g1, axis=1), initial=0.0)
-                                 / (MARCH_STEP_CELLS * fields.grid.cell))) + 1)
-    chunk = max(1, _MAX_EVALUATIONS // (plate_lines * steps))
+    steps = march_steps(np.linalg.norm(g2 - g1, axis=1), fields.grid.cell)
+    chunk = max(1, _MAX_EVALUATIONS // (plate_lines * int(steps.max(initial=2))))
     for start in range(0, b, chunk):
         s = slice(start, min(b, start + chunk))
-        part = _contacts_chunk(fields, g1[s], g2[s], jaw_width, field_index[s], plate_lines, steps)
+        part = _contacts_chunk(fields, g1[s], g2[s], jaw_width, field_index[s], plate_lines, steps[s])
         for name in ("c1", "c2", "n1", "n2", "status", "w1", "w2", "patch1", "patch2"):
             getattr(out, name)[s] = getattr(part, name)
     return out
 
 
+def march_steps(length: np.ndarray, cell: float) -> np.ndarray:
+    """Samples (B,) of the march along lines of the given lengths (m): equal steps of at
+    most MARCH_STEP_CELLS cells, both ends included, at least three samples."""
+    return np.maximum(2, np.ceil(np.asarray(length, dtype=float) / (MARCH_STEP_CELLS * cell))).astype(np.intp) + 1
+
+
 def _contacts_chunk(fields: SDFBatch, g1, g2, jaw_width, fidx, plate_lines, steps) -> Contacts:
+    """find_contacts on one chunk; ``steps`` (B,) is each grasp's number of march samples."""
     b = len(g1)
     rows = np.arange(b)
     d = g2 - g1
@@ -237,7 +255,11 @@ def _contacts_chunk(fields: SDFBatch, g1, g2, jaw_width, fidx, plate_lines, step
     safe = np.where(length > 0, length, 1.0)
     perp = np.column_stack([-d[:, 1], d[:, 0]]) / safe[:, None]
     offsets = np.linspace(-0.5 * jaw_width, 0.5 * jaw_width, plate_lines)
-    ts = np.linspace(0.0, 1.0, steps)
+    # Grasp b's samples at t = k / (steps_b - 1); the shorter rows repeat their end
+    # (t = 1), which changes neither the first nor the last inside sample.
+    last = int(steps.max())
+    dt = 1.0 / (steps - 1)
+    ts = np.minimum(np.arange(last)[None, :] / (steps - 1)[:, None], 1.0)  # (B, T)
     starts = g1[:, None, :] + offsets[None, :, None] * perp[:, None, :]  # (B, K, 2)
     f = read_lines(fields, fidx, starts, d, ts)  # (B, K, T)
     inside = f <= 0.0
@@ -245,17 +267,16 @@ def _contacts_chunk(fields: SDFBatch, g1, g2, jaw_width, fidx, plate_lines, step
 
     # Jaw 1: first inside sample from g1; jaw 2: first inside sample from g2.
     i1 = np.argmax(inside, axis=2)
-    i2 = steps - 1 - np.argmax(inside[:, :, ::-1], axis=2)
+    i2 = last - 1 - np.argmax(inside[:, :, ::-1], axis=2)
     ok1 = hit & (i1 > 0)
-    ok2 = hit & (i2 < steps - 1)
+    ok2 = hit & (i2 < last - 1)
     status = np.full(b, OK, dtype=np.int8)
     status[~(ok1.any(axis=1) & ok2.any(axis=1))] = MISSED
     status[inside[:, :, 0].any(axis=1) | inside[:, :, -1].any(axis=1)] = TOO_WIDE
     good = status == OK
-    dt = ts[1] - ts[0]
     tie = TIE_CELLS * fields.grid.cell / safe[:, None]
     t1 = np.where(ok1, _secant(f, ts, np.maximum(i1 - 1, 0), i1), np.inf)
-    t2 = np.where(ok2, _secant(f, ts, np.minimum(i2 + 1, steps - 1), i2), -np.inf)
+    t2 = np.where(ok2, _secant(f, ts, np.minimum(i2 + 1, last - 1), i2), -np.inf)
     # Refine the bracketed-earliest line of each jaw. A nearly tied line that is already
     # inside at that depth truly hits first (the bracket's error ranked it wrongly); only
     # those are refined in turn.
@@ -265,7 +286,7 @@ def _contacts_chunk(fields: SDFBatch, g1, g2, jaw_width, fidx, plate_lines, step
     line = np.concatenate([best1, best2])
     t_best = np.concatenate([t1[rows, best1], t2[rows, best2]])
     t_best = np.where(np.concatenate([good, good]), t_best, 0.5)
-    t_ref, point, normal, valid = _refine(fields, fidx[row], starts[row, line], d[row], t_best, dt)
+    t_ref, point, normal, valid = _refine(fields, fidx[row], starts[row, line], d[row], t_best, dt[row])
     depth = np.stack([t_ref[:b], t_ref[b:]])  # (2, B)
     tied = np.stack([t1 <= t1[rows, best1][:, None] + tie, t2 >= t2[rows, best2][:, None] - tie])
     tied &= good[None, :, None]
@@ -278,7 +299,7 @@ def _contacts_chunk(fields: SDFBatch, g1, g2, jaw_width, fidx, plate_lines, step
         jaw, trow, tline = jaw[earlier], trow[earlier], tline[earlier]
     if len(jaw):
         guess = np.where(jaw == 0, t1[trow, tline], t2[trow, tline])
-        t_e, p_e, n_e, v_e = _refine(fields, fidx[trow], starts[trow, tline], d[trow], guess, dt)
+        t_e, p_e, n_e, v_e = _refine(fields, fidx[trow], starts[trow, tline], d[trow], guess, dt[trow])
         # Keep, per jaw and grasp, the earliest of the refined lines (from that jaw's side).
         key = jaw * b + trow
         order = np.lexsort((np.where(jaw == 0, t_e, -t_e), key))
@@ -308,12 +329,14 @@ def _contacts_chunk(fields: SDFBatch, g1, g2, jaw_width, fidx, plate_lines, step
 
 def _secant(f, ts, i_out, i_in):
     """Parameter where the straight line between the samples at i_out (outside, f > 0)
-    and i_in (inside, f <= 0) crosses zero."""
+    and i_in (inside, f <= 0) of each line (B, K) crosses zero; ts (B, T) are each
+    grasp's sample parameters."""
     fa = np.take_along_axis(f, i_out[..., None], axis=2)[..., 0]
     fb = np.take_along_axis(f, i_in[..., None], axis=2)[..., 0]
     with np.errstate(invalid="ignore", divide="ignore"):
         frac = np.where(fa != fb, fa / (fa - fb), 0.0)
-    return ts[i_out] + (ts[i_in] - ts[i_out]) * np.clip(frac, 0.0, 1.0)
+    t_out, t_in = np.take_along_axis(ts, i_out, axis=1), np.take_along_axis(ts, i_in, axis=1)
+    return t_out + (t_in - t_out) * np.clip(frac, 0.0, 1.0)
 
 
 def _refine(fields, fidx, start, d, t, dt):
@@ -348,14 +371,16 @@ def _cell_coordinates(grid: Grid, points: np.ndarray):
 
 def read_lines(fields: SDFBatch, fidx, starts, d, ts) -> np.ndarray:
     """Bilinear field values (B, K, T) along the lines starts[b, k] + ts * d[b] of field
-    fidx[b] (a quick march; see :func:`interpolate` for the smooth interpolant); outside
-    the grid's nodes the object is taken to be absent (a large positive value)."""
+    fidx[b], with ts (T,) shared or (B, T) per grasp (a quick march; see
+    :func:`interpolate` for the smooth interpolant); outside the grid's nodes the object
+    is taken to be absent (a large positive value)."""
     grid, m = fields.grid, fields.grid.size
-    t32 = ts.astype(np.float32)[None, None, :]
+    ts = np.asarray(ts)
+    t32 = ts.astype(np.float32)[None, None, :] if ts.ndim == 1 else ts.astype(np.float32)[:, None, :]
 
     def grid_units(axis):  # positions along one axis, in cells from the first node
         u = np.repeat(((starts[..., axis] - grid.coords[0]) / grid.cell).astype(np.float32)[..., None],
-                      len(ts), axis=2)
+                      ts.shape[-1], axis=2)
         u += t32 * (d[:, axis] / grid.cell).astype(np.float32)[:, None, None]
         return u
 

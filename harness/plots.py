@@ -262,3 +262,52 @@ def runtime_figure(bench: dict):
     ax.legend(fontsize=8)
     ax.set_title("Runtime against grid size (bench planning)", fontsize=10)
     return fig
+
+
+#: Colours of the bandit policies in the study's figure.
+POLICY_COLOURS = {"thompson": "tab:red", "gittins": "tab:purple", "ucb": "tab:orange", "uniform": "tab:blue",
+                  "pruning": "tab:green"}
+
+
+def bandit_figure(study: dict):
+    """Like Laskey et al.'s convergence plots (from the bandit study of ``bench planning``
+    or ``bench bandit``): against the draws spent, the P_F of each policy's best grasp so
+    far as a fraction of the best candidate's (gp-p's choice), averaged over the study's
+    runs, and the share of runs within 1 % and 3 % of it."""
+    runs = [r for r in study.get("runs", []) if "skipped" not in r and r.get("target", 0) > 0]
+    fig, axes = plt.subplots(1, 2, figsize=(11.0, 4.2), constrained_layout=True)
+    policies = [p for p in POLICY_COLOURS if runs and all(p in r["curves"] for r in runs)]
+    if policies:
+        first = min(r["curves"][p][0][0] for r in runs for p in policies)
+        last = max(r["curves"][p][-1][0] for r in runs for p in policies)
+        grid = np.unique(np.geomspace(first, last, 300).round())
+        lowest = 1.0
+        for policy in policies:
+            fractions = np.empty((len(runs), len(grid)))
+            for k, r in enumerate(runs):
+                curve = np.asarray(r["curves"][policy], dtype=float)
+                # A step function: each round's answer stands until the next (and after the last).
+                at = np.searchsorted(curve[:, 0], grid, side="right") - 1
+                fractions[k] = np.where(at >= 0, curve[np.maximum(at, 0), 2] / r["target"], np.nan)
+            started = np.isfinite(fractions).all(axis=0)  # once every run has an answer
+            colour = POLICY_COLOURS[policy]
+            mean = fractions[:, started].mean(axis=0)
+            lowest = min(lowest, float(mean.min()))
+            axes[0].step(grid[started], mean, where="post", color=colour, label=policy)
+            for tol, style in ((0.01, "-"), (0.03, "--")):
+                share = (fractions[:, started] >= 1.0 - tol).mean(axis=0)
+                axes[1].step(grid[started], share, where="post", color=colour, ls=style)
+        for level, style in ((0.99, "-"), (0.97, "--")):
+            axes[0].axhline(level, color="0.6", ls=style, lw=0.8)
+        axes[0].set_ylim(max(0.0, lowest - 0.01), 1.005)
+    for ax in axes:
+        ax.set_xscale("log")
+        ax.set_xlabel("draws spent (pulls)")
+    axes[0].set_ylabel("P_F of the best grasp so far / best candidate's (mean)")
+    axes[0].legend(fontsize=8, loc="lower right", title="policy", title_fontsize=8)
+    axes[1].set_ylabel("share of runs within 1 % (solid), 3 % (dashed)")
+    axes[1].set_ylim(0.0, 1.02)
+    fig.suptitle(f"Bandit allocation of draws (bench planning): {len(runs)} runs, "
+                 f"{len(study.get('scenes', []))} scenes x {study.get('seeds', '?')} seeds; grey lines: 99 % and 97 %",
+                 fontsize=10)
+    return fig

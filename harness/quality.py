@@ -4,13 +4,15 @@ plates' pressure, their Wilson intervals, and failure counts by reason."""
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
 
 from harness.belief import Belief
-from harness.grasp import DEGENERATE, MISSED, OK, TOO_WIDE, Grasp, SDFBatch, find_contacts, plate_closure
+from harness.grasp import (DEGENERATE, HULL_DIRECTIONS, MISSED, OK, TOO_WIDE, Grasp, Regions, SDFBatch, find_contacts,
+                           plate_closure)
 from harness.lift import LIFT_REASONS, judge, side_normal
 from harness.settings import GraspSettings
 
@@ -75,6 +77,67 @@ def draw_evaluation(belief: Belief, n: int, shapes_rng: np.random.Generator, app
         pressure=pressure_rng.random((n, 2)),
         torque_scale=belief.characteristic_length,
     )
+
+
+#: Paired draws a DrawPool adds at a time.
+POOL_BLOCK = 100
+
+
+class DrawPool:
+    """The n paired draws of :func:`draw_evaluation` (the same numbers from the same four
+    generators), drawn in blocks of ``block`` as they are first needed, so that a planner
+    judging most grasps on a few draws pays for the shape samples (and their regions)
+    it uses, not for all n.
+
+    The approach, friction and pressure deviates are drawn at once (they are cheap). The
+    shape samples come block by block when the belief's sampler for n draws is
+    weight-space, whose stream does not depend on how the draws are split; under the
+    pathwise sampler, whose stream does, all n at once. ``seconds`` is the time spent
+    drawing shapes and computing their derived fields."""
+
+    def __init__(self, belief: Belief, n: int, shapes_rng: np.random.Generator, approach_rng: np.random.Generator,
+                 friction_rng: np.random.Generator, pressure_rng: np.random.Generator, block: int = POOL_BLOCK):
+        self.belief = belief
+        self.n = int(n)
+        self.approach = approach_rng.standard_normal((n, 2, 2))
+        self.friction = friction_rng.standard_normal(n)
+        self.pressure = pressure_rng.random((n, 2))
+        self.method = belief.sampler(n)
+        self.block = int(block) if self.method == "weight-space" else self.n
+        self.drawn = 0
+        self.seconds = 0.0
+        self._shapes_rng = shapes_rng
+        m = belief.grid.size
+        self._fields = np.empty((4, n, m, m), dtype=np.float32)  # values, gx, gy, twist
+        self._area = np.zeros(n)
+        self._com = np.full((n, 2), np.nan)
+        self._hull = np.full((n, HULL_DIRECTIONS, 2), -np.inf)
+        self._draws: EvaluationDraws | None = None
+
+    def __len__(self) -> int:
+        return self.n
+
+    def draws(self, count: int) -> EvaluationDraws:
+        """The draws made so far, at least the first ``count`` (at most n), drawing the
+        blocks that are missing."""
+        start = time.perf_counter()
+        grid = self.belief.grid
+        while self.drawn < min(count, self.n):
+            k = min(self.block, self.n - self.drawn)
+            shapes = self.belief.sample(k, self._shapes_rng, method=self.method)
+            part = SDFBatch(grid, shapes.values, shapes.gradients)
+            s = slice(self.drawn, self.drawn + k)
+            self._fields[:, s] = part.values, part.gx, part.gy, part.twist
+            self._area[s], self._com[s], self._hull[s] = part.regions.area, part.regions.center_of_mass, \
+                part.regions.hull
+            self.drawn += k
+            d = self.drawn
+            shapes = SDFBatch.of_parts(grid, *self._fields[:, :d], Regions(self._area[:d], self._com[:d],
+                                                                            self._hull[:d]))
+            self._draws = EvaluationDraws(shapes, self.approach[:d], self.friction[:d], self.pressure[:d],
+                                          self.belief.characteristic_length)
+        self.seconds += time.perf_counter() - start
+        return self._draws
 
 
 @dataclass(frozen=True)
@@ -150,20 +213,42 @@ def evaluate_draws(grasps, draws: EvaluationDraws, settings: GraspSettings, lift
     starts = as_starts(grasps)
     g, n = len(starts), len(draws)
     g1, g2 = executed_starts(starts, draws.approach, settings)
-    field = np.tile(np.arange(n), g)
-    gamma = np.tile(settings.frictions(draws.friction), g)
+    return _judge(g1, g2, np.tile(np.arange(n), g), draws, settings, lift, (g, n))
+
+
+def evaluate_pairs(grasps, draw_index, draws: EvaluationDraws, settings: GraspSettings,
+                   lift: bool = True) -> DrawOutcomes:
+    """Judge P (grasp, draw) pairs: grasp p ((P, 2, 2) jaw starts) on paired draw
+    ``draw_index[p]`` only, exactly as :func:`evaluate_draws` judges that grasp on that
+    draw. The outcomes' arrays are (P,) (their ``estimates`` are not defined). A bandit
+    pulls its arms this way: each arm on its own next draw, all arms in one call."""
+    starts = as_starts(grasps)
+    index = np.asarray(draw_index, dtype=np.int64).reshape(-1)
+    if len(index) != len(starts):
+        raise ValueError(f"{len(starts)} grasps but {len(index)} draw indices")
+    approach = draws.approach[index]
+    g1, g2 = within_opening(starts[:, 0] + settings.sigma_g * approach[:, 0],
+                            starts[:, 1] + settings.sigma_g * approach[:, 1], settings.opening)
+    return _judge(g1, g2, index, draws, settings, lift, (len(index),))
+
+
+def _judge(g1, g2, field, draws: EvaluationDraws, settings: GraspSettings, lift: bool, shape) -> DrawOutcomes:
+    """Outcomes of executed jaw starts g1, g2 (B, 2) on draws ``field`` (B,), reshaped to
+    ``shape`` (see :func:`evaluate_draws` for the order of the failure reasons)."""
+    b = len(field)
+    gamma = settings.frictions(draws.friction[field])
     contacts = find_contacts(draws.shapes, g1, g2, settings.jaw_width, field_index=field)
     ok = contacts.status == OK
     closure, quality = plate_closure(contacts, gamma, draws.shapes.center_of_mass[field], draws.torque_scale)
     held = closure
-    reason = np.full(g * n, -1, dtype=np.int8)
+    reason = np.full(b, -1, dtype=np.int8)
     reason[~ok & (contacts.status == TOO_WIDE)] = FAILURE_REASONS.index("too_wide")
     reason[~ok & (contacts.status == MISSED)] = FAILURE_REASONS.index("missed")
     reason[~ok & (contacts.status == DEGENERATE)] = FAILURE_REASONS.index("degenerate_normal")
     reason[ok & ~closure] = FAILURE_REASONS.index("friction_cone")
-    lifted = np.zeros(g * n, dtype=bool)
-    pivots = np.zeros(g * n, dtype=bool)
-    chance = np.zeros(g * n)
+    lifted = np.zeros(b, dtype=bool)
+    pivots = np.zeros(b, dtype=bool)
+    chance = np.zeros(b)
     if lift and held.any():
         regions = draws.shapes.regions
         f = field[held]
@@ -173,8 +258,8 @@ def evaluate_draws(grasps, draws: EvaluationDraws, settings: GraspSettings, lift
                         draws.pressure[f], settings)
         lifted[held], pivots[held], chance[held] = verdict.lifted, verdict.pivots, verdict.chance
         reason[np.flatnonzero(held)[~verdict.lifted]] = len(PLANAR_REASONS) + verdict.reason[~verdict.lifted]
-    return DrawOutcomes(closure.reshape(g, n), lifted.reshape(g, n) if lift else None, reason.reshape(g, n),
-                        pivots.reshape(g, n), quality.reshape(g, n), chance.reshape(g, n) if lift else None)
+    return DrawOutcomes(closure.reshape(shape), lifted.reshape(shape) if lift else None, reason.reshape(shape),
+                        pivots.reshape(shape), quality.reshape(shape), chance.reshape(shape) if lift else None)
 
 
 def estimate_p_f(grasps, draws: EvaluationDraws, settings: GraspSettings, lift: bool = True) -> list[QualityEstimate]:

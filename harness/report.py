@@ -395,11 +395,18 @@ def _figures(out_dir, data, summary, bins, fails) -> list:
         save(plots.failures_figure(fails), "failures.png")
     save(plots.calibration_figure(bins), "calibration.png")
     bench_file = Path(out_dir) / "bench-planning.json"
+    study = None
     if bench_file.is_file():  # written by: gpis-harness bench planning --json > DIR/bench-planning.json
         bench = json.loads(bench_file.read_text())
         if bench.get("convergence"):
             save(plots.convergence_figure(bench), "convergence.png")
         save(plots.runtime_figure(bench), "runtime.png")
+        study = bench.get("bandit")
+    bandit_file = Path(out_dir) / "bench-bandit.json"
+    if bandit_file.is_file():  # written by: gpis-harness bench bandit --json > DIR/bench-bandit.json
+        study = json.loads(bandit_file.read_text())
+    if study and study.get("runs"):
+        save(plots.bandit_figure(study), "bandit.png")
     config = ExperimentConfig.from_dict(data["config"])
     plans = data["plans"]
     for path in config.scenes:

@@ -14,7 +14,8 @@ from harness.errors import InputError, describe
 from planners.base import Planner
 
 ENTRY_POINT_GROUP = "gpis_harness.planners"
-BUILTINS = ("planners.mean_shape:MeanShape", "planners.gp_p:GPP", "planners.gp_gpis_opt:GPGPISOpt")
+BUILTINS = ("planners.mean_shape:MeanShape", "planners.gp_p:GPP", "planners.gp_gpis_opt:GPGPISOpt",
+            "planners.gp_bandit:GPBandit")
 
 _TRUE = ("true", "yes", "1")
 _FALSE = ("false", "no", "0")

@@ -234,6 +234,24 @@ def test_a_batch_of_grasps_on_a_batch_of_fields_equals_one_at_a_time():
         np.testing.assert_allclose(together.n2[i], single.n2[0], atol=1e-9)
 
 
+def test_a_grasps_contacts_do_not_depend_on_the_other_grasps_in_its_batch():
+    """Each grasp is marched in steps set by its own length: a short grasp judged beside a
+    long one gets exactly (bit for bit) the contacts, normals, patches and status it
+    gets alone."""
+    grid = Grid(40, 0.2)
+    fields = [disk_field(grid, r, c) for r, c in ((0.012, (0.01, 0.0)), (0.03, (0.0, -0.01)))]
+    batch = SDFBatch(grid, np.stack([f[0] for f in fields]), np.stack([f[1] for f in fields]))
+    g1 = np.array([[-0.011, 0.003], [-0.085, -0.02], [0.0, -0.052]])
+    g2 = np.array([[0.031, 0.001], [0.085, 0.0], [0.0, 0.033]])
+    index = np.array([0, 1, 1])
+    together = find_contacts(batch, g1, g2, JAW, field_index=index)
+    assert (together.status == 0).all()
+    for i in range(3):
+        alone = find_contacts(batch, g1[i:i + 1], g2[i:i + 1], JAW, field_index=index[i:i + 1])
+        for name in ("c1", "c2", "n1", "n2", "w1", "w2", "patch1", "patch2", "status"):
+            np.testing.assert_array_equal(getattr(together, name)[i], getattr(alone, name)[0], err_msg=name)
+
+
 def test_failures_are_reported_with_their_reason():
     grid = Grid(40, 0.2)
     values, grads = disk_field(grid, 0.03)

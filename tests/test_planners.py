@@ -21,6 +21,7 @@ from harness.seeding import stream
 from harness.settings import resolve
 from harness.testing import check_planner
 from planners.base import Plan, Planner, Problem
+from planners.gp_bandit import GPBandit
 from planners.gp_gpis_opt import GPGPISOpt
 from planners.gp_p import GPP
 from planners.mean_shape import MeanShape
@@ -129,7 +130,7 @@ def test_plan_is_abstract():
 def test_every_built_in_planner_returns_a_valid_grasp_on_every_library_scene(beliefs, name):
     belief = beliefs(name)
     problem = Problem.for_belief(belief)
-    for planner in (MeanShape(), GPP(), GPGPISOpt()):
+    for planner in (MeanShape(), GPP(), GPGPISOpt(), GPBandit()):
         plan = planner.plan(problem, stream(0, name, planner.name))
         assert plan.status == "ok", (planner.name, plan.status, plan.message)
         assert plan.grasp.problem(belief.grid, problem.settings.opening) is None
@@ -147,7 +148,7 @@ def test_gp_gpis_opt_finds_a_secure_grasp_on_the_rectangle(beliefs):
 
 def test_planners_report_a_trace_and_their_work(beliefs):
     problem = Problem.for_belief(beliefs("disk"))
-    for planner in (MeanShape(), GPP(samples=200, candidates=20), GPGPISOpt()):
+    for planner in (MeanShape(), GPP(samples=200, candidates=20), GPGPISOpt(), GPBandit()):
         plan = planner.plan(problem, stream(1, "disk", planner.name))
         times = [t[0] for t in plan.trace]
         assert times == sorted(times) and len(times) > 0

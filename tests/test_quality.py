@@ -11,8 +11,8 @@ from scipy.stats import binom
 
 from harness.belief import build_belief
 from harness.grasp import Grasp, find_contacts
-from harness.quality import (FAILURE_REASONS, within_opening, default_streams, draw_evaluation, estimate_p_f,
-                             evaluate_draws, wilson_interval)
+from harness.quality import (FAILURE_REASONS, POOL_BLOCK, DrawPool, within_opening, default_streams, draw_evaluation,
+                             estimate_p_f, evaluate_draws, evaluate_pairs, wilson_interval)
 from harness.scene import load_scene
 from harness.seeding import stream
 from harness.settings import resolve
@@ -69,6 +69,42 @@ def test_grasps_judged_together_share_every_draw(rectangle):
         alone = evaluate_draws(grasp, draws, settings(0.004))
         np.testing.assert_array_equal(together.closure[g], alone.closure[0])
         np.testing.assert_array_equal(together.reason[g], alone.reason[0])
+
+
+def test_pairs_of_grasps_and_draws_are_judged_as_on_the_full_grid(rectangle):
+    """evaluate_pairs on scattered (grasp, draw) pairs gives exactly the grid's entries."""
+    _, draws = rectangle
+    grasps = np.stack([through_centre(a).array for a in (0, 10, 35, 80)])
+    grid = evaluate_draws(grasps, draws, settings(0.004))
+    rng = np.random.default_rng(5)
+    which, draw = rng.integers(0, 4, 300), rng.integers(0, len(draws), 300)
+    pairs = evaluate_pairs(grasps[which], draw, draws, settings(0.004))
+    for name in ("closure", "lifted", "reason", "pivots", "ferrari_canny", "lift_chance"):
+        np.testing.assert_array_equal(getattr(pairs, name), getattr(grid, name)[which, draw], err_msg=name)
+    assert (~grid.closure).any() and grid.closure.any()
+
+
+def test_a_draw_pool_holds_the_same_draws_as_draw_evaluation(rectangle):
+    """On the rectangle, 250 draws come block by block (the weight-space sampler) and 120
+    at once (pathwise, whose stream depends on the split): either way the pool's draws are
+    draw_evaluation's, bit for bit, and only the blocks asked for are drawn."""
+    belief, _ = rectangle
+    for n, sampler in ((250, "weight-space"), (120, "pathwise")):
+        assert belief.sampler(n) == sampler
+        whole = draw_evaluation(belief, n, *default_streams(3, "rectangle"))
+        pool = DrawPool(belief, n, *default_streams(3, "rectangle"))
+        first = pool.draws(30)
+        assert len(first) == (POOL_BLOCK if sampler == "weight-space" else n) and pool.drawn == len(first)
+        full = pool.draws(n)
+        assert len(full) == n and len(pool.draws(1)) == n
+        for name in ("values", "gx", "gy", "twist"):
+            np.testing.assert_array_equal(getattr(full.shapes, name), getattr(whole.shapes, name), err_msg=name)
+        for name in ("area", "center_of_mass", "hull"):
+            np.testing.assert_array_equal(getattr(full.shapes.regions, name), getattr(whole.shapes.regions, name),
+                                          err_msg=name)
+        for name in ("approach", "friction", "pressure"):
+            np.testing.assert_array_equal(getattr(full, name), getattr(whole, name), err_msg=name)
+        assert full.torque_scale == whole.torque_scale
 
 
 def test_every_draw_is_a_success_or_exactly_one_failure(rectangle):

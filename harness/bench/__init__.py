@@ -186,12 +186,14 @@ def _planner_row(scene_name: str, size: int) -> dict:
     return out
 
 
-def planning(sizes=PLANNING_SIZES, scene: str = SAMPLING_SCENE) -> dict:
+def planning(sizes=PLANNING_SIZES, scene: str = SAMPLING_SCENE, seeds: int | None = None, scenes=None) -> dict:
     """Seconds per P_F and per P_L estimate (1000 paired draws), per SCP initialisation and
-    per GP-P candidate over grid sizes, with their growth; the convergence study; and
-    gp-gpis-opt against gp-p, both planning for the lift, over the library."""
+    per GP-P candidate over grid sizes, with their growth; the convergence study; gp-gpis-opt
+    against gp-p, both planning for the lift, over the library; and the bandit study
+    (:func:`bandit`, ``seeds`` and ``scenes`` its size; ``seeds = 0`` skips it)."""
     from harness.scene import library_names, load_scene
 
+    study_names = _bandit_scenes(scenes)
     for m in sizes:
         load_scene(scene, overrides=_sampling_overrides(m))
         load_scene(PLANNER_SCENE, overrides=_sampling_overrides(m, PLANNER_SCENE))
@@ -215,7 +217,34 @@ def planning(sizes=PLANNING_SIZES, scene: str = SAMPLING_SCENE) -> dict:
             "planner_scene": PLANNER_SCENE, "scp_s_per_init": scp, "gpp_s_per_candidate": gpp,
             "scp_over_gpp": {m: scp[m] / gpp[m] for m in scp},
             "scp_growth_exponent": growth(list(scp.values())), **_convergence_summary(convergence),
-            "lift_planners": _lift_summary(lift_rows)}
+            "lift_planners": _lift_summary(lift_rows), "bandit": bandit(seeds, study_names)}
+
+
+def _bandit_scenes(scenes) -> list[str]:
+    """The bandit study's scenes, each checked (InputError for an unknown one) before any work."""
+    from harness.bench import bandit_study
+
+    names = list(scenes) if scenes is not None else bandit_study.study_scenes()
+    for name in names:
+        bandit_study.scene_of(name)
+    return names
+
+
+def bandit(seeds: int | None = None, scenes=None) -> dict:
+    """The bandit convergence study (harness/bench/bandit_study.py): per scene (one process
+    each) and seed, every gp-bandit policy's best grasp after every round judged on 1000
+    evaluation draws against gp-p's choice; the draws and seconds to within 1 % and 3 %,
+    and the default planners' plan times. ``seeds`` (default 3; 0 skips the study) and
+    ``scenes`` (default: the library and the shared outlines) set its size."""
+    from harness.bench import bandit_study
+
+    seeds = bandit_study.SEEDS if seeds is None else seeds
+    names = _bandit_scenes(scenes)
+    if seeds == 0 or not names:
+        return {"seeds": seeds, "scenes": names, "runs": [], "summary": None}
+    runs = [run for name in names for run in _in_fresh_process(bandit_study.scene_runs, name, seeds)]
+    return {"seeds": seeds, "scenes": names, "tolerances": list(bandit_study.TOLERANCES),
+            "adaptive_budget": bandit_study.ADAPTIVE_BUDGET, "runs": runs, "summary": bandit_study.summarise(runs)}
 
 
 def _lift_summary(rows: list[dict]) -> dict:
@@ -382,13 +411,16 @@ def lift(trials: int = 16, seed: int = 0) -> dict:
     return {**validate(trials=trials, seed=seed), "manifold_levers": manifold_levers(seed=seed)}
 
 
-def run(which: str = "all", exact_max_mb: float = 2500.0, sizes=None) -> dict:
-    """Run the named benchmark(s); returns a JSON-ready dict."""
+def run(which: str = "all", exact_max_mb: float = 2500.0, sizes=None, seeds: int | None = None, scenes=None) -> dict:
+    """Run the named benchmark(s); returns a JSON-ready dict. ``seeds`` and ``scenes`` size
+    the bandit study (``bandit``, and inside ``planning``)."""
     results = {}
     if which in ("sampling", "all"):
         results["sampling"] = sampling(tuple(sizes or SAMPLING_SIZES), exact_max_mb)
     if which in ("planning", "all"):
-        results["planning"] = planning(tuple(sizes or PLANNING_SIZES))
+        results["planning"] = planning(tuple(sizes or PLANNING_SIZES), seeds=seeds, scenes=scenes)
+    if which == "bandit":
+        results["bandit"] = bandit(seeds, scenes)
     if which in ("quality", "all"):
         results["quality"] = quality()
     if which in ("physics", "all"):
@@ -404,6 +436,8 @@ def format_results(results: dict) -> str:
         results = {"physics": results}
     elif "manifold_levers" in results:
         results = {"lift": results}
+    elif "tolerances" in results or "summary" in results:
+        results = {"bandit": results}
     elif "rows" in results:
         kind = ("sampling" if "active_set_effect" in results else "quality" if "heavy_scenes" in results
                 else "planning")
@@ -412,6 +446,8 @@ def format_results(results: dict) -> str:
     for name, res in results.items():
         if name == "lift":
             lines += _lift_lines(res)
+        if name == "bandit":
+            lines += _bandit_lines(res)
         if name == "physics":
             lines.append(f"physics: {res['trials']} trials from the library scenes, step {res['time_step']:.6g} s, "
                          f"{res['solver_iterations']} solver iterations")
@@ -461,6 +497,8 @@ def format_results(results: dict) -> str:
                                      for k, v in lift["mean_p_l"].items())
                          + f"; gp-gpis-opt-lift / gp-p-lift: P_L {lift['p_l_ratio']:.3f}, "
                            f"time {lift['time_ratio']:.3f}")
+            if res.get("bandit"):
+                lines += _bandit_lines(res["bandit"])
         if name == "sampling":
             lines.append(f"sampling: {res['samples']} grid samples (values + gradients), scene '{res['scene']}'")
             lines.append(f"{'M':>5} {'fit s':>8} {'fast s':>8} {'exact s':>9} {'peak MB':>9} {'D':>6} {'r':>4}  method")
@@ -479,6 +517,39 @@ def format_results(results: dict) -> str:
                 f"{a['mean_change_max_mm']:.3f}), std ratio {a['std_ratio_median']:.3f} (max {a['std_ratio_max']:.3f}); "
                 f"the full fit's own error vs truth: {a['full_error_vs_truth_p90_mm']:.3f} mm (90th pct)")
     return "\n".join(lines)
+
+
+def _bandit_lines(res: dict) -> list[str]:
+    summary = res.get("summary")
+    if not summary:
+        return ["bandit study: skipped (no seeds or no scenes)"]
+
+    def num(v, fmt):
+        return "never" if v is None else format(v, fmt)
+
+    lines = [f"bandit study: {summary['runs']} runs ({len(res['scenes'])} scenes x {res['seeds']} seeds); the best "
+             f"grasp after every round judged on 1000 evaluation draws against gp-p's choice. Draws (and seconds) "
+             f"until it stays within 1 % / 3 %: median and 90th percentile over runs (never: not within the "
+             f"run's draws), the median of uniform's over the policy's per run, and the share of runs within "
+             f"after 1000 draws",
+             f"{'policy':<9}{'median':>12}{'p90':>13}{'seconds':>14}{'uniform/pol':>13}{'at 1000':>11}"
+             f"{'pull/draw':>10}{'plan s':>8}"]
+    for policy, row in summary["policies"].items():
+        one, three = row["1pct"], row["3pct"]
+
+        def pair(key, fmt, row1=one, row3=three):
+            return f"{num(row1[key], fmt)} / {num(row3[key], fmt)}"
+
+        lines.append(f"{policy:<9}{pair('median_draws', '.0f'):>12}{pair('p90_draws', '.0f'):>13}"
+                     f"{pair('median_seconds', '.3f'):>14}{pair('median_uniform_over_policy_draws', '.1f'):>13}"
+                     f"{one['within_after']['1000']:>6.2f}/{three['within_after']['1000']:.2f}"
+                     f"{num(row['pull_over_gp_p_draw'], '.2f'):>9}{num(row['median_plan_s'], '.3f'):>8}")
+    lines.append(f"uniform made gp-p's choice in {summary['uniform_is_gp_p']} of {summary['runs']} runs; "
+                 f"pull/draw: seconds per pull (pool included) over gp-p's per draw")
+    lines.append("library scenes, default parameters: " + ", ".join(
+        f"{k} P_F {v['mean_p_f']:.3f} in {num(v['median_plan_s'], '.3f')} s (median; mean {v['mean_plan_s']:.3f})"
+        for k, v in summary["library_defaults"].items() if v["runs"]))
+    return lines
 
 
 def _lift_lines(res: dict) -> list[str]:

@@ -1,0 +1,238 @@
+"""The bandit convergence study (``bench bandit``, part of ``bench planning``): how many
+draws, and how many seconds, each gp-bandit policy needs before its chosen grasp is within
+1 % and 3 % of the best candidate's P_F, against uniform allocation and iterative pruning,
+like Laskey et al. (CASE 2015), over the library scenes and the shared outlines.
+
+One run is one scene and seed: one belief, the planners' stream shared by gp-p and every
+policy (so all judge the same candidates on the same pool of draws), and 1000 evaluation
+draws of the study's own, on which the best grasp after every round is judged. The target
+is the P_F of gp-p's choice (every candidate on all its draws), which uniform allocation
+reaches exactly when its budget covers every candidate's draws.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+from shapely.geometry import Polygon
+
+from harness.belief import build_belief
+from harness.errors import InputError
+from harness.quality import default_streams, draw_evaluation, estimate_p_f
+from harness.scene import Scene, library_names, load_scene, parse_scene
+from harness.seeding import stream
+from planners.allocation import POLICIES
+from planners.base import Problem
+from planners.gp_bandit import GPBandit
+from planners.gp_p import GPP
+from planners.registry import make_planner
+
+#: The shared outlines beside the repository (../shared/objects), when present.
+SHARED_OBJECTS = Path(__file__).resolve().parents[3] / "shared" / "objects"
+SEEDS = 3
+TOLERANCES = (0.01, 0.03)
+#: Draws after which the study reports the share of runs within each tolerance.
+ANYTIME_BUDGETS = (250, 500, 1000, 2000, 5000)
+EVALUATION_DRAWS = 1000
+#: Budget (draws) of the adaptive policies; uniform and pruning may spend every
+#: candidate's draws (uniform then makes gp-p's choice).
+ADAPTIVE_BUDGET = 30_000
+#: Planners compared with their default parameters (plan time, P_F).
+DEFAULTS_COMPARED = ("gp-bandit", "gp-gpis-opt", "gp-p")
+#: A shared outline is scaled so that it is at most this long and this wide (m), so
+#: that it fits the gripper's 12 cm opening across its width, on a 40 x 40 grid of 5 mm.
+OUTLINE_LENGTH = 0.16
+OUTLINE_WIDTH = 0.08
+#: ... and reaches at most this far from its centroid (the grid keeps 2 cells clear).
+OUTLINE_REACH = 0.085
+
+
+def study_scenes() -> list[str]:
+    """Names of the study's scenes: the library, then ``shared_<outline>`` for every
+    outline in ../shared/objects (none when that folder is absent)."""
+    shared = sorted(p.stem for p in SHARED_OBJECTS.glob("*.csv")) if SHARED_OBJECTS.is_dir() else []
+    return library_names() + [f"shared_{name}" for name in shared]
+
+
+def scene_of(name: str) -> Scene:
+    """A library scene, or ``shared_<outline>``: the outline on a 40 x 40 grid of 5 mm,
+    scaled to fit OUTLINE_LENGTH x OUTLINE_WIDTH, read with the sensor and gripper of
+    examples/shared_objects/tape.toml."""
+    if not name.startswith("shared_"):
+        return load_scene(name)
+    path = SHARED_OBJECTS / f"{name.removeprefix('shared_')}.csv"
+    if not path.is_file():
+        raise InputError("--scenes", None, f"no outline {path} for scene '{name}'")
+    vertices = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+    size = np.sort(vertices.max(axis=0) - vertices.min(axis=0))
+    reach = np.linalg.norm(vertices - np.asarray(Polygon(vertices).centroid.coords[0]), axis=1).max()
+    scale = min(OUTLINE_LENGTH / size[1], OUTLINE_WIDTH / size[0], OUTLINE_REACH / reach)
+    data = {"name": name, "description": f"shared outline {path.stem}, scaled by {scale:.4g} m per unit",
+            "grid": {"size": 40, "extent": 0.2},
+            "shape": {"type": "outline", "path": str(path), "scale": scale, "center": "centroid"},
+            "sensor": {"noise": "0.5 cells", "interior_keep": 0.1},
+            "physics": {"thickness": 0.025, "density": 900.0, "friction": 0.5},
+            "gripper": {"opening": 0.12, "jaw_width": 0.01}}
+    return parse_scene(data, source=str(path), base_dir=path.parent, default_name=name)
+
+
+def run(name: str, seed: int, candidates: int = 100, samples: int = 1000, budget: int = ADAPTIVE_BUDGET,
+        batch: int | None = None, policies=POLICIES, defaults: bool = True) -> dict:
+    """One run: every policy's curve (draws, seconds, P_F of its best grasp so far on the
+    evaluation draws, kept at the first round, the rounds where that P_F changes and the
+    last), gp-p's plan time and choice, the target, and (``defaults``) the default
+    planners' plan times and P_F."""
+    scene = scene_of(name)
+    belief = build_belief(scene, stream(seed, scene.name, 0, "sensor")).prepare()
+    problem = Problem.for_belief(belief)
+    evaluation = draw_evaluation(belief, EVALUATION_DRAWS, *default_streams(seed, f"{scene.name}-bandit-evaluation"))
+    judged: dict = {}
+
+    def p_f(grasp) -> float:
+        key = np.asarray(grasp, dtype=float).tobytes()
+        if key not in judged:
+            judged[key] = estimate_p_f(grasp[None], evaluation, problem.settings, lift=False)[0].p_f
+        return judged[key]
+
+    planner_stream = ("planner", "gp-bandit-study")
+    t0 = time.perf_counter()
+    gpp = GPP(candidates=candidates, samples=samples).plan(problem, stream(seed, scene.name, 0, *planner_stream))
+    gpp_s = time.perf_counter() - t0
+    out = {"scene": scene.name, "seed": seed, "gp_p_s": gpp_s, "gp_p_draws": gpp.evaluations * samples,
+           "target": p_f(gpp.grasp.array), "curves": {}, "plan_s": {}, "seconds": {}}
+    if gpp.status != "ok":
+        out["skipped"] = f"gp-p: {gpp.status}"
+        return out
+    if defaults:
+        out["defaults"] = _defaults(problem, scene.name, seed, p_f)
+    extra = {} if batch is None else {"batch": batch}
+    for policy in policies:
+        full = policy in ("uniform", "pruning")
+        planner = GPBandit(candidates=candidates, samples=samples, policy=policy,
+                           budget_draws=candidates * samples if full else budget, **extra)
+        record: list = []
+        t0 = time.perf_counter()
+        plan = planner.plan(problem, stream(seed, scene.name, 0, *planner_stream), record=record)
+        out["plan_s"][policy] = time.perf_counter() - t0
+        out["seconds"][policy] = dict(plan.seconds)
+        curve = [(draws, seconds, p_f(grasp)) for seconds, draws, grasp in record]
+        out["curves"][policy] = [point for k, point in enumerate(curve)
+                                 if k in (0, len(curve) - 1) or point[2] != curve[k - 1][2]]
+        if policy == "uniform":
+            out["uniform_is_gp_p"] = bool(np.array_equal(record[-1][2], gpp.grasp.array)) if full else None
+    return out
+
+
+def _defaults(problem: Problem, scene: str, seed: int, p_f) -> dict:
+    """Plan time and P_F (on the study's evaluation draws) of gp-bandit, gp-gpis-opt and
+    gp-p with their default parameters and their own streams, as in ``make eval``."""
+    out = {}
+    for name in DEFAULTS_COMPARED:
+        planner = make_planner(name)
+        t0 = time.perf_counter()
+        plan = planner.plan(problem, stream(seed, scene, 0, "planner", name))
+        seconds = time.perf_counter() - t0
+        out[name] = {"plan_s": seconds, "p_f": p_f(plan.grasp.array) if plan.grasp is not None else 0.0,
+                     "status": plan.status}
+    return out
+
+
+def scene_runs(name: str, seeds: int, **options) -> list[dict]:
+    """Every seed's run on one scene (one process per scene in the benchmark)."""
+    from planners.allocation import gittins_table
+
+    gittins_table(GPBandit().discount)  # computed once per process, before any clock starts
+    return [run(name, seed, **options) for seed in range(seeds)]
+
+
+def reached(curve: list, target: float, tolerance: float):
+    """(draws, seconds) after which the best grasp's P_F stays within ``tolerance`` of
+    ``target`` (relative) to the end of the run, or (None, None) when it ends outside."""
+    inside = [p >= (1.0 - tolerance) * target for _, _, p in curve]
+    if not inside or not inside[-1]:
+        return None, None
+    k = len(inside) - 1
+    while k > 0 and inside[k - 1]:
+        k -= 1
+    return curve[k][0], curve[k][1]
+
+
+def summarise(runs: list[dict], policies=POLICIES) -> dict:
+    """Per policy and tolerance: the median and 90th percentile of the draws, and the
+    median seconds, to reach it (a run that never does counts as infinitely many; an
+    infinite statistic is None), how many runs reach it, the median over runs of
+    uniform's draws (seconds) over the policy's, and the share of runs within it after
+    each of ANYTIME_BUDGETS draws (a budgeted planner's view). Per policy also its seconds
+    per pull (pool included) over gp-p's per draw, and its median plan time. Plus the
+    default planners' plan times and P_F on the library scenes (``make eval``'s)."""
+    runs = [r for r in runs if "skipped" not in r]
+    table = {}
+    for policy in (p for p in policies if all(p in r["curves"] for r in runs)):
+        row = {}
+        for tol in TOLERANCES:
+            draws, seconds, ratio_d, ratio_s = [], [], [], []
+            for r in runs:
+                d, s = reached(r["curves"][policy], r["target"], tol)
+                du, su = reached(r["curves"]["uniform"], r["target"], tol)
+                draws.append(math.inf if d is None else d)
+                seconds.append(math.inf if s is None else s)
+                ratio_d.append(_ratio(du, d))
+                ratio_s.append(_ratio(su, s))
+            within = {str(b): float(np.mean([at_draws(r["curves"][policy], b) >= (1 - tol) * r["target"]
+                                             for r in runs])) for b in ANYTIME_BUDGETS}
+            row[f"{round(tol * 100)}pct"] = {
+                "median_draws": _quantile(draws, 0.5), "p90_draws": _quantile(draws, 0.9),
+                "median_seconds": _quantile(seconds, 0.5), "reached": sum(math.isfinite(d) for d in draws),
+                "runs": len(runs), "median_uniform_over_policy_draws": _quantile(ratio_d, 0.5),
+                "median_uniform_over_policy_seconds": _quantile(ratio_s, 0.5), "within_after": within}
+        row["median_plan_s"] = _quantile([r["plan_s"][policy] for r in runs], 0.5)
+        row["pull_over_gp_p_draw"] = _quantile(
+            [(r["seconds"][policy]["allocation"] + r["seconds"][policy]["draws"]) / r["curves"][policy][-1][0]
+             / (r["gp_p_s"] / r["gp_p_draws"]) for r in runs], 0.5)
+        table[policy] = row
+    library = set(library_names())
+    defaults = {}
+    for name in DEFAULTS_COMPARED:
+        rows = [r["defaults"][name] for r in runs if r["scene"] in library and "defaults" in r]
+        defaults[name] = {"median_plan_s": _quantile([d["plan_s"] for d in rows], 0.5),
+                          "mean_plan_s": float(np.mean([d["plan_s"] for d in rows])) if rows else None,
+                          "mean_p_f": float(np.mean([d["p_f"] for d in rows])) if rows else None, "runs": len(rows)}
+    return {"policies": table, "median_gp_p_s": _quantile([r["gp_p_s"] for r in runs], 0.5),
+            "uniform_is_gp_p": sum(bool(r.get("uniform_is_gp_p")) for r in runs), "runs": len(runs),
+            "library_defaults": defaults}
+
+
+def at_draws(curve: list, draws: int) -> float:
+    """The P_F of the best grasp after the last round that ended within ``draws`` draws
+    (0 before the first round)."""
+    value = 0.0
+    for d, _, p in curve:
+        if d > draws:
+            break
+        value = p
+    return value
+
+
+def _ratio(uniform, policy) -> float:
+    """uniform / policy, where None (never reached) is infinitely many."""
+    if policy is None:
+        return 0.0 if uniform is not None else math.nan
+    return math.inf if uniform is None else uniform / policy
+
+
+def _quantile(values, q: float) -> float | None:
+    """The q-quantile (the lower of two middle values' mean for the median), infinities
+    counted as the largest values and NaN left out; None when there is nothing or the
+    quantile is infinite (JSON has no infinity)."""
+    values = sorted(v for v in values if not math.isnan(v))
+    if not values:
+        return None
+    n = len(values)
+    if q == 0.5 and n % 2 == 0:
+        mid = 0.5 * (values[n // 2 - 1] + values[n // 2])
+    else:
+        mid = values[min(n - 1, math.ceil(q * n) - 1)]
+    return float(mid) if math.isfinite(mid) else None

@@ -1,0 +1,91 @@
+"""GP-bandit: GP-P's candidates as the arms of a Beta-Bernoulli bandit (Laskey et al.,
+CASE 2015): one pull judges one candidate on one paired draw of the pool, and the policy
+spends the draws where they decide the choice."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from harness.grasp import Grasp
+from harness.quality import DrawPool, evaluate_pairs
+from planners import candidates as cand
+from planners.allocation import POLICIES, Arms, allocate
+from planners.base import Plan, Planner, Problem, Stopwatch, check_quality
+
+#: The discounts whose Gittins table is affordable (its calibration grows as
+#: 1 / (1 - discount)^2).
+DISCOUNTS = (0.5, 0.95)
+
+
+class GPBandit(Planner):
+    name = "gp-bandit"
+    description = "GP-P's candidates as bandit arms: draws spent by Thompson sampling, Gittins, Bayes-UCB or uniformly"
+    BOUNDS = {"candidates": (1, 10_000), "samples": (1, 10_000), "budget_draws": (1, 100_000_000),
+              "batch": (1, 100_000), "discount": DISCOUNTS, "angular_noise_deg": (0.0, 90.0)}
+
+    def __init__(self, candidates: int = 100, samples: int = 1000, policy: str = "thompson",
+                 budget_draws: int = 1000, batch: int = 2000, discount: float = 0.9,
+                 quality: str = "force_closure", angular_noise_deg: float = 10.0):
+        if min(candidates, samples, budget_draws, batch) < 1:
+            raise ValueError("candidates, samples, budget_draws and batch must be at least 1")
+        if policy not in POLICIES:
+            raise ValueError(f"policy must be one of {', '.join(POLICIES)}, got {policy!r}")
+        if not DISCOUNTS[0] <= discount <= DISCOUNTS[1]:
+            raise ValueError(f"discount must lie in [{DISCOUNTS[0]}, {DISCOUNTS[1]}], got {discount}")
+        self.candidates = int(candidates)
+        self.samples = int(samples)
+        self.policy = policy
+        self.budget_draws = int(budget_draws)
+        self.batch = int(batch)
+        self.discount = float(discount)
+        self.quality = check_quality(quality)
+        self.angular_noise_deg = float(angular_noise_deg)
+
+    def plan(self, problem: Problem, rng: np.random.Generator, record: list | None = None) -> Plan:
+        """As Planner.plan; ``record`` (a list) receives (seconds, draws used, best grasp
+        (2, 2)) after every round, for convergence studies. Afterwards ``grasps_`` holds the
+        candidates (G, 2, 2) and ``arms_`` their posteriors and pulls
+        (planners.allocation.Arms): where the draws went.
+
+        The generator is used as gp-p uses it (candidates, then the pool's four streams),
+        then once more for the policy's own stream: at the same seed both planners judge the
+        same candidates on the same draws."""
+        clock = Stopwatch(problem.time_budget_s)
+        belief, settings = problem.belief, problem.settings
+        if belief.mean_shape.is_empty:
+            return Plan.without_grasp("no_surface", "the posterior mean has no inside", seconds=clock.phases)
+        grasps = cand.generate(belief, self.candidates, rng, settings, np.radians(self.angular_noise_deg))
+        clock.lap("candidates")
+        if len(grasps) == 0:
+            return Plan.without_grasp("no_candidate", "no candidate grasp fits the gripper", seconds=clock.phases)
+        pool = DrawPool(belief, self.samples, *rng.spawn(4))
+        policy_rng = rng.spawn(1)[0]
+        lift = self.quality == "lift"
+
+        def pull(arm, draw):
+            outcomes = evaluate_pairs(grasps[arm], draw, pool.draws(int(draw.max()) + 1), settings, lift=lift)
+            return (outcomes.lifted if lift else outcomes.closure), outcomes.ferrari_canny
+
+        trace: list = []
+
+        def after_round(arms: Arms, used: int):
+            best = arms.best()
+            seconds = clock.elapsed()
+            trace.append((seconds, used, float(arms.mean[best])))
+            if record is not None:
+                record.append((seconds, used, grasps[best].copy()))
+
+        arms = allocate(pull, Arms.fresh(len(grasps), self.samples), self.policy, self.budget_draws, self.batch,
+                        policy_rng, self.discount, stop=clock.over_budget, after_round=after_round)
+        self.grasps_, self.arms_ = grasps, arms
+        used = int(arms.pulls.sum())
+        clock.lap("allocation")
+        clock.phases["draws"] = pool.seconds  # drawn inside the allocation, as pulls reached them
+        clock.phases["allocation"] -= pool.seconds
+        finished = used >= self.budget_draws or arms.room.sum() == 0
+        best = arms.best()
+        g = grasps[best]
+        return Plan(Grasp(tuple(g[0]), tuple(g[1])), "ok" if finished else "budget", float(arms.mean[best]),
+                    iterations=len(trace), evaluations=used, seconds=clock.phases, trace=tuple(trace),
+                    message=f"{self.policy}: {used} draws over {len(grasps)} candidates, the chosen one "
+                            f"{int(arms.pulls[best])} ({int(arms.successes[best])} successes)")

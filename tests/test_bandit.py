@@ -1,0 +1,325 @@
+"""The bandit planner (planners/gp_bandit.py), its allocation (planners/allocation.py) and
+its study (harness/bench/bandit_study.py): the Beta-Bernoulli update, the Gittins table
+against a second formulation and the published value, every policy on synthetic bandits
+with known means, gp-p's scores and choice reproduced by uniform allocation on the same
+draws, determinism, the conformance kit, an experiment, and the study's measures."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+from scipy import integrate
+
+from harness.belief import build_belief
+from harness.errors import InputError
+from harness.quality import draw_evaluation, estimate_p_f
+from harness.scene import load_scene
+from harness.seeding import stream
+from harness.testing import check_planner
+from planners import candidates as cand
+from planners.allocation import (GITTINS_PULLS, POLICIES, Arms, allocate, bayes_ucb_index, gittins_index,
+                                 gittins_table, round_counts)
+from planners.base import Problem
+from planners.gp_bandit import GPBandit
+from planners.gp_p import GPP
+from planners.registry import make_planner
+
+
+@pytest.fixture(scope="module")
+def beliefs():
+    cache = {}
+
+    def get(name):
+        if name not in cache:
+            cache[name] = build_belief(load_scene(name), stream(0, name, 0, "sensor")).prepare()
+        return cache[name]
+
+    return get
+
+
+# -- the posterior -----------------------------------------------------------------------
+
+
+def test_the_posterior_after_a_round_is_the_beta_closed_form():
+    """Arms pulled several times in one round: the posterior mean equals the mean of
+    p^s (1 - p)^f under the uniform prior, integrated numerically (a second formulation)."""
+    arms = Arms.fresh(3, 50)
+    chosen = np.array([0, 0, 1, 2, 0, 1, 2, 2, 2])
+    success = np.array([1, 0, 1, 1, 1, 0, 1, 1, 0], dtype=bool)
+    arms.record(chosen, success, np.arange(9) / 10)
+    assert arms.successes.tolist() == [2, 1, 3] and arms.pulls.tolist() == [3, 2, 4]
+    assert arms.tie.tolist() == pytest.approx([0.0 + 0.1 + 0.4, 0.2 + 0.5, 0.3 + 0.6 + 0.7 + 0.8], abs=1e-12)
+    for a in range(3):
+        s, f = arms.successes[a], arms.pulls[a] - arms.successes[a]
+        weight = integrate.quad(lambda p: p**s * (1 - p) ** f, 0, 1)[0]
+        mean = integrate.quad(lambda p: p ** (s + 1) * (1 - p) ** f, 0, 1)[0] / weight
+        assert arms.mean[a] == pytest.approx(mean, abs=1e-12)
+        assert (arms.alpha[a], arms.beta[a]) == (1 + s, 1 + f)
+    # One pull at a time gives the same posterior as the round at once.
+    single = Arms.fresh(3, 50)
+    for k in range(len(chosen)):
+        single.record(chosen[k:k + 1], success[k:k + 1], np.array([k / 10]))
+    assert single.successes.tolist() == arms.successes.tolist()
+    assert single.tie == pytest.approx(arms.tie, abs=1e-12)
+
+
+def test_the_best_arm_is_the_highest_posterior_mean_then_more_pulls_then_the_tie_break():
+    arms = Arms.fresh(4, 10)
+    arms.successes[:] = [3, 1, 3, 0]
+    arms.pulls[:] = [4, 1, 4, 0]  # means 4/6, 2/3, 4/6, 1/2: arms 0, 1, 2 tie at 2/3
+    arms.tie[:] = [1.0, 5.0, 2.0, 0.0]
+    assert arms.best() == 2  # 4 pulls beat 1; tie-break 2.0 / 4 beats 1.0 / 4
+    arms.tie[2] = 1.0
+    assert arms.best() == 0  # a full tie goes to the lower index, as in gp-p
+
+
+# -- the Gittins index ----------------------------------------------------------------------
+
+
+def restart_index(a: float, b: float, discount: float, horizon: int = 250) -> float:
+    """The Gittins index of a Beta(a, b) Bernoulli arm by Katehakis & Veinott's (1987)
+    restart-in-state formulation, a second route to the index: (1 - discount) times the
+    value at (a, b) of the problem where every step either pulls the arm in its current
+    state or restarts it from (a, b) and pulls there; backward induction over ``horizon``
+    steps from 0 (truncation error discount^horizon), on every state reachable in them."""
+    size = horizon + 2
+    i, j = np.arange(size)[:, None], np.arange(size)[None, :]
+    mean = (a + i) / (a + b + i + j)
+    value = np.zeros((size + 1, size + 1))
+    for _ in range(horizon):
+        pull = mean + discount * (mean * value[1:, :size] + (1 - mean) * value[:size, 1:])
+        value[:size, :size] = np.maximum(pull, pull[0, 0])
+    return (1 - discount) * value[0, 0]
+
+
+def test_a_fresh_arm_at_discount_0_9_has_the_published_gittins_index():
+    # Gittins' tables give 0.7029 for a Beta(1, 1) arm at discount 0.9.
+    assert gittins_table(0.9)[0, 0] == pytest.approx(0.7029, abs=5e-5)
+    assert restart_index(1, 1, 0.9) == pytest.approx(0.7029, abs=5e-5)
+
+
+@pytest.mark.parametrize("discount, states", [(0.9, [(0, 0), (1, 1), (3, 0), (7, 5), (20, 19), (40, 8), (100, 0),
+                                                     (100, 50), (100, 97), (100, 100)]),
+                                              (0.95, [(2, 1), (60, 55), (100, 99)])])
+def test_the_gittins_table_agrees_with_the_restart_formulation(discount, states):
+    table = gittins_table(discount)
+    for n, s in states:
+        assert table[n, s] == pytest.approx(restart_index(1 + s, 1 + n - s, discount), abs=5e-5), (n, s)
+
+
+def test_gittins_indices_rise_with_successes_and_fall_with_failures_and_exceed_the_mean():
+    table = gittins_table(0.9)
+    n = np.arange(GITTINS_PULLS + 1)
+    for pulls in (1, 10, 60, GITTINS_PULLS):
+        row = table[pulls, : pulls + 1]
+        assert np.all(np.diff(row) > 0)
+        assert np.all(row > (1 + np.arange(pulls + 1)) / (pulls + 2))
+    # One more failure lowers the index, one more success raises it.
+    for pulls, s in [(0, 0), (5, 2), (50, 45)]:
+        assert table[pulls + 1, s] < table[pulls, s] < table[pulls + 1, s + 1]
+    # A longer horizon (higher discount) values exploration more.
+    assert np.all(gittins_table(0.95)[n, n // 2] > table[n, n // 2])
+    # Beyond the table the bonus keeps shrinking, continuing its last row.
+    last = gittins_index(np.array([50.0, 97.0]), GITTINS_PULLS)
+    beyond = gittins_index(np.array([50.0, 97.0]) * (GITTINS_PULLS + 3) / (GITTINS_PULLS + 2), GITTINS_PULLS + 1)
+    assert np.all(np.abs(beyond - last) < 2e-3)
+    far = gittins_index(np.array([500.0]), 1000)[0]
+    assert 501 / 1002 < far < 501 / 1002 + (table[GITTINS_PULLS, 50] - 51 / 102) * 103 / 1003 + 1e-9
+
+
+def test_bayes_ucb_is_the_posterior_quantile():
+    from scipy import stats
+
+    assert bayes_ucb_index(3, 10, 0.9) == pytest.approx(stats.beta(4, 8).ppf(0.9), abs=1e-10)
+
+
+# -- the policies on synthetic bandits ------------------------------------------------------
+
+#: Ten arms with known success probabilities; arm 2 is the best by 0.3.
+MEANS = np.array([0.55, 0.3, 0.9, 0.45, 0.6, 0.2, 0.5, 0.35, 0.4, 0.25])
+BEST = 2
+
+
+def synthetic(policy: str, seed: int, budget: int = 600, depth: int = 1000) -> Arms:
+    rng = np.random.default_rng(seed)
+    outcomes = rng.random((len(MEANS), depth)) < MEANS[:, None]
+    return allocate(lambda arm, draw: (outcomes[arm, draw], np.zeros(len(arm))), Arms.fresh(len(MEANS), depth),
+                    policy, budget, 1000, rng.spawn(1)[0])
+
+
+@pytest.mark.parametrize("policy", POLICIES)
+def test_every_policy_finds_the_best_of_ten_arms_within_600_pulls(policy):
+    """50 seeds; the probability of returning arm 2 must be at least 0.9 (uniform
+    allocation, 60 pulls per arm, returns it with probability above 0.999; every policy
+    was measured at 1.00). The adaptive policies must also spend most pulls on it."""
+    runs = [synthetic(policy, seed) for seed in range(50)]
+    found = np.mean([arms.best() == BEST for arms in runs])
+    assert found >= 0.9, found
+    assert all(arms.pulls.sum() <= 600 and arms.pulls.max() <= 1000 for arms in runs)
+    share = np.mean([arms.pulls[BEST] / arms.pulls.sum() for arms in runs])
+    if policy == "uniform":
+        assert share == pytest.approx(0.1, abs=1e-12)
+    elif policy == "pruning":
+        assert share > 0.3, share  # the others are dropped once their bounds part
+    else:
+        assert share > 0.5, share
+
+
+def test_uniform_allocation_is_round_robin_in_arm_order():
+    arms = Arms.fresh(4, 10)
+    counts = round_counts("uniform", arms, 6, 0, np.random.default_rng(0))
+    assert counts.tolist() == [2, 2, 1, 1]
+    arms.pulls[:] = [2, 2, 1, 1]  # pulls 6, 7 and 8 go to arms 2, 3 and 0
+    assert round_counts("uniform", arms, 3, 6, np.random.default_rng(0)).tolist() == [1, 0, 1, 1]
+
+
+def test_thompson_rounds_follow_the_posterior_probability_of_being_best():
+    """Two arms, Beta(3, 1) and Beta(1, 3): the first draws the larger value with
+    probability 1 - 3 B(3, 4) = 0.95 (and by integration); a round of 20000 pulls splits
+    accordingly (binomial 5-sigma band)."""
+    arms = Arms.fresh(2, 100_000)
+    arms.successes[:] = [2, 0]
+    arms.pulls[:] = [2, 2]
+    counts = round_counts("thompson", arms, 20_000, 4, np.random.default_rng(3))
+    p = integrate.quad(lambda x: 3 * x**2 * (1 - (1 - x) ** 3), 0, 1)[0]
+    assert p == pytest.approx(0.95, abs=1e-12)
+    assert abs(counts[0] - 20_000 * p) < 5 * math.sqrt(20_000 * p * (1 - p))
+
+
+def test_no_arm_is_pulled_beyond_its_draws():
+    arms = allocate(lambda arm, draw: (np.ones(len(arm), dtype=bool), np.zeros(len(arm))), Arms.fresh(3, 7),
+                    "thompson", 100, 50, np.random.default_rng(0))
+    assert arms.pulls.tolist() == [7, 7, 7]
+
+
+# -- the planner ------------------------------------------------------------------------------
+
+
+def test_uniform_allocation_reproduces_gp_p_scores_and_choice_on_the_same_draws(beliefs):
+    """Marker (heavy uncertainty), 40 candidates x 300 draws: every candidate's share of
+    force-closure draws equals gp-p's P_F on the same draws, exactly, its mean
+    Ferrari-Canny quality to 1e-12, and the chosen grasp is gp-p's."""
+    belief = beliefs("marker")
+    problem = Problem.for_belief(belief)
+    bandit = GPBandit(candidates=40, samples=300, policy="uniform", budget_draws=40 * 300, batch=700)
+    plan = bandit.plan(problem, stream(4, "marker", "bandit-vs-gp-p"))
+    rng = stream(4, "marker", "bandit-vs-gp-p")  # as gp-p uses it: candidates, then the pool's four streams
+    grasps = cand.generate(belief, 40, rng, problem.settings, np.radians(10.0))
+    draws = draw_evaluation(belief, 300, *rng.spawn(4))
+    estimates = estimate_p_f(grasps, draws, problem.settings, lift=False)
+    np.testing.assert_array_equal(bandit.grasps_, grasps)
+    assert bandit.arms_.pulls.tolist() == [300] * len(grasps)
+    np.testing.assert_array_equal(bandit.arms_.successes, [round(e.p_f * 300) for e in estimates])
+    np.testing.assert_allclose(bandit.arms_.tie / 300, [e.ferrari_canny_mean for e in estimates], rtol=1e-12)
+    gpp = GPP(candidates=40, samples=300).plan(problem, stream(4, "marker", "bandit-vs-gp-p"))
+    assert plan.grasp == gpp.grasp and plan.status == "ok"
+    assert 0.3 < gpp.estimate < 1.0  # a real choice, not a tie at 1
+
+
+def test_planning_for_the_lift_counts_the_lifted_draws(beliefs):
+    belief = beliefs("tape")
+    problem = Problem.for_belief(belief)
+    bandit = GPBandit(candidates=12, samples=200, policy="uniform", budget_draws=12 * 200, quality="lift")
+    bandit.plan(problem, stream(0, "tape", "lift"))
+    rng = stream(0, "tape", "lift")
+    grasps = cand.generate(belief, 12, rng, problem.settings, np.radians(10.0))
+    draws = draw_evaluation(belief, 200, *rng.spawn(4))
+    p_l = [e.p_l for e in estimate_p_f(grasps, draws, problem.settings)]
+    np.testing.assert_array_equal(bandit.arms_.successes, np.round(np.array(p_l) * 200).astype(int))
+
+
+@pytest.mark.parametrize("policy", POLICIES)
+def test_the_same_seed_gives_the_same_plan(beliefs, policy):
+    problem = Problem.for_belief(beliefs("tape"))
+    plans = []
+    for _ in range(2):
+        planner = GPBandit(candidates=30, samples=200, policy=policy, budget_draws=1500)
+        plans.append((planner.plan(problem, stream(7, "tape", policy)), planner.arms_.pulls.copy()))
+    (a, pulls_a), (b, pulls_b) = plans
+    assert a.grasp == b.grasp and a.estimate == b.estimate
+    assert [t[1:] for t in a.trace] == [t[1:] for t in b.trace]
+    np.testing.assert_array_equal(pulls_a, pulls_b)
+    assert a.evaluations == pulls_a.sum() and a.status == "ok"
+    # Pruning stops when one candidate is left with all its draws; the others spend the budget.
+    assert a.evaluations == 1500 if policy != "pruning" else a.evaluations < 1500
+
+
+def test_thompson_spends_most_draws_on_few_candidates(beliefs):
+    problem = Problem.for_belief(beliefs("tape"))
+    planner = GPBandit(budget_draws=3000)
+    plan = planner.plan(problem, stream(0, "tape", "thompson"))
+    pulls = np.sort(planner.arms_.pulls)[::-1]
+    assert plan.evaluations == 3000 and pulls[:10].sum() > 0.5 * 3000
+    assert plan.trace[-1][1] == 3000 and plan.trace[-1][2] == pytest.approx(plan.estimate)
+
+
+def test_the_bandit_passes_the_conformance_kit():
+    check_planner(GPBandit)
+
+
+@pytest.mark.parametrize("params, field", [({"policy": "greedy"}, None), ({"discount": "0.99"}, "discount"),
+                                           ({"batch": "0"}, "batch"), ({"budget_draws": "-5"}, "budget_draws")])
+def test_bad_bandit_parameters_are_input_errors(params, field):
+    with pytest.raises(InputError) as err:
+        make_planner("gp-bandit", params)
+    assert err.value.field == field
+
+
+def test_the_bandit_runs_in_an_experiment(tmp_path):
+    from harness.cli import main
+
+    config = tmp_path / "bandit.toml"
+    config.write_text('name = "bandit"\nseed = 2\nscenes = ["disk"]\nrealisations = 1\n\n[evaluation]\n'
+                      'analytic_draws = 50\nposterior_trials = 2\ntruth_trials = 1\ntime_budget_s = 30.0\n\n'
+                      '[[planners]]\nname = "gp-bandit"\nlabel = "gp-bandit-ucb"\n'
+                      'params = { policy = "ucb", budget_draws = 500 }\n')
+    out = tmp_path / "out"
+    assert main(["eval", str(config), "--out", str(out), "--workers", "1"]) == 0
+    summary = pd.read_csv(out / "summary.csv")
+    row = summary[(summary.scene == "disk") & (summary.planner == "gp-bandit-ucb")].iloc[0]
+    assert row.plans_ok == "1/1" and row.p_f > 0.9 and row.n_trials == 2  # the posterior trials
+
+
+# -- the study ---------------------------------------------------------------------------------
+
+
+def test_a_target_is_reached_where_the_curve_stays_within_it_to_the_end():
+    from harness.bench.bandit_study import reached
+
+    curve = [(20, 0.1, 0.90), (40, 0.2, 0.99), (60, 0.3, 0.95), (80, 0.4, 0.98), (100, 0.5, 1.0)]
+    assert reached(curve, 1.0, 0.03) == (80, 0.4)
+    assert reached(curve, 1.0, 0.01) == (100, 0.5)
+    assert reached(curve, 1.0, 0.001) == (100, 0.5)
+    assert reached(curve[:3], 1.0, 0.03) == (None, None)
+
+
+def test_a_tiny_study_measures_every_policy_and_draws_its_figure(tmp_path):
+    from harness import plots
+    from harness.bench import bandit_study
+
+    runs = [bandit_study.run("disk", 0, candidates=12, samples=60, budget=300, defaults=False)]
+    for r in runs:
+        assert r["uniform_is_gp_p"] and set(r["curves"]) == set(POLICIES)
+        assert r["curves"]["uniform"][-1][0] == 12 * 60 and r["curves"]["thompson"][-1][0] == 300
+        assert r["curves"]["uniform"][-1][2] == r["target"]  # uniform ends on gp-p's choice
+    summary = bandit_study.summarise(runs)
+    assert summary["uniform_is_gp_p"] == 1 and summary["policies"]["uniform"]["3pct"]["reached"] == 1
+    assert summary["policies"]["uniform"]["3pct"]["median_uniform_over_policy_draws"] == 1.0
+    fig = plots.bandit_figure({"runs": runs, "scenes": ["disk"], "seeds": 1})
+    fig.savefig(tmp_path / "bandit.png")
+    assert (tmp_path / "bandit.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_the_study_refuses_unknown_scenes_before_any_work(capsys):
+    from harness.cli import main
+
+    for argv in (["bench", "bandit", "--scenes", "disk,no_such_scene"], ["bench", "bandit", "--seeds", "-1"],
+                 ["bench", "bandit", "--scenes", "shared_no_such_outline"]):
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert len(err.strip().splitlines()) == 1 and err.startswith("gpis-harness: error: "), (argv, err)
+    assert main(["bench", "bandit", "--seeds", "0", "--scenes", "disk", "--json"]) == 0
+    assert '"summary": null' in capsys.readouterr().out
