@@ -21,3 +21,21 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         if "slow" in item.keywords:
             item.add_marker(skip)
+
+
+@pytest.fixture(scope="module")
+def beliefs():
+    """beliefs(name): the library scene's belief at seed 0, prepared, built once per test
+    module (test_belief.py keeps its own, unprepared)."""
+    from harness.belief import build_belief
+    from harness.scene import load_scene
+    from harness.seeding import stream
+
+    cache = {}
+
+    def get(name):
+        if name not in cache:
+            cache[name] = build_belief(load_scene(name), stream(0, name, 0, "sensor")).prepare()
+        return cache[name]
+
+    return get

@@ -13,10 +13,8 @@ import pandas as pd
 import pytest
 from scipy import integrate
 
-from harness.belief import build_belief
 from harness.errors import InputError
 from harness.quality import draw_evaluation, estimate_p_f
-from harness.scene import load_scene
 from harness.seeding import stream
 from harness.testing import check_planner
 from planners import candidates as cand
@@ -26,18 +24,6 @@ from planners.base import Problem
 from planners.gp_bandit import GPBandit
 from planners.gp_p import GPP
 from planners.registry import make_planner
-
-
-@pytest.fixture(scope="module")
-def beliefs():
-    cache = {}
-
-    def get(name):
-        if name not in cache:
-            cache[name] = build_belief(load_scene(name), stream(0, name, 0, "sensor")).prepare()
-        return cache[name]
-
-    return get
 
 
 # -- the posterior -----------------------------------------------------------------------

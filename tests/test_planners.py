@@ -30,18 +30,6 @@ from planners.registry import make_planner
 from faulty_planners import ForgetsParameter, NoPlan
 
 
-@pytest.fixture(scope="module")
-def beliefs():
-    cache = {}
-
-    def get(name):
-        if name not in cache:
-            cache[name] = build_belief(load_scene(name), stream(0, name, 0, "sensor")).prepare()
-        return cache[name]
-
-    return get
-
-
 @pytest.mark.parametrize("cls, params", [(MeanShape, None), (GPP, {"samples": 300, "candidates": 30}),
                                          (GPGPISOpt, None), (MeanShape, {"quality": "lift"}),
                                          (GPP, {"samples": 300, "candidates": 30, "quality": "lift"}),
