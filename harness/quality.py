@@ -15,6 +15,7 @@ from harness.grasp import (DEGENERATE, HULL_DIRECTIONS, MISSED, OK, TOO_WIDE, Gr
                            plate_closure)
 from harness.lift import LIFT_REASONS, judge, side_normal
 from harness.settings import GraspSettings
+from harness.squeeze import squeeze
 
 #: Failure reasons, in the order a draw is classified (the first that applies): the
 #: planar ones (P_F), then the lift's for draws in force closure (P_L).
@@ -143,9 +144,11 @@ class DrawPool:
 @dataclass(frozen=True)
 class QualityEstimate:
     """P_F and P_L of one grasp: the estimates and their Wilson 95 % intervals, the number
-    of draws, failures by reason (the planar reasons count draws P_F loses, all of them
-    the draws P_L loses), the draws whose weight turned the object about the grasp axis
-    (lifted or not), and the mean Ferrari-Canny quality (0 for a failed draw)."""
+    of draws, failures by reason (all of them the draws P_L loses; P_F loses the planar
+    reasons' draws and the squeezed ones), the draws whose weight turned the object about
+    the grasp axis (lifted or not), the mean Ferrari-Canny quality (0 for a failed draw),
+    and the draws out of force closure that the plates' squeeze brought into it (so P_L
+    may exceed P_F; harness.squeeze)."""
 
     p_f: float
     ci_low: float
@@ -157,20 +160,25 @@ class QualityEstimate:
     p_l_ci_low: float
     p_l_ci_high: float
     pivots: int
+    squeezed: int = 0
 
     def as_dict(self) -> dict:
         return {"p_f": self.p_f, "ci_low": self.ci_low, "ci_high": self.ci_high, "p_l": self.p_l,
                 "p_l_ci_low": self.p_l_ci_low, "p_l_ci_high": self.p_l_ci_high, "samples": self.samples,
-                "failures": dict(self.failures), "pivots": self.pivots, "ferrari_canny_mean": self.ferrari_canny_mean}
+                "failures": dict(self.failures), "pivots": self.pivots, "squeezed": self.squeezed,
+                "ferrari_canny_mean": self.ferrari_canny_mean}
 
 
 @dataclass(frozen=True)
 class DrawOutcomes:
-    """Per-draw results (G, n) for G grasps: force closure, lifted (force closure and the
+    """Per-draw results (G, n) for G grasps: force closure (the paper's, at the first
+    contacts), lifted (force closure at once or after the plates' squeeze, and the
     lift; None when the lift was not judged), failure reason index into FAILURE_REASONS
     (-1 for lifted, or for force closure without the lift), whether the weight turned
-    the object, the Ferrari-Canny quality, and the lift's chance averaged over the
-    levers (0 out of force closure; None when the lift was not judged)."""
+    the object, the Ferrari-Canny quality, the lift's chance averaged over the levers (0
+    out of force closure; None when the lift was not judged), and whether the squeeze
+    brought the plates into force closure (harness.squeeze; never when the lift was not
+    judged)."""
 
     closure: np.ndarray
     lifted: np.ndarray | None
@@ -178,6 +186,7 @@ class DrawOutcomes:
     pivots: np.ndarray
     ferrari_canny: np.ndarray
     lift_chance: np.ndarray | None = None
+    squeezed: np.ndarray | None = None
 
     @cached_property
     def estimates(self) -> list[QualityEstimate]:
@@ -189,9 +198,10 @@ class DrawOutcomes:
         counts = np.stack([(self.reason == r).sum(axis=1) for r in range(len(FAILURE_REASONS))], axis=1)
         fc = self.ferrari_canny.mean(axis=1)
         pivots = self.pivots.sum(axis=1)
+        squeezed = self.squeezed.sum(axis=1) if self.squeezed is not None else np.zeros(len(k), dtype=int)
         return [QualityEstimate(float(k[g] / n), float(lo[g]), float(hi[g]), n,
                                 {name: int(counts[g, r]) for r, name in enumerate(FAILURE_REASONS)}, float(fc[g]),
-                                float(kl[g] / n), float(llo[g]), float(lhi[g]), int(pivots[g]))
+                                float(kl[g] / n), float(llo[g]), float(lhi[g]), int(pivots[g]), int(squeezed[g]))
                 for g in range(len(k))]
 
 
@@ -204,10 +214,12 @@ def evaluate_draws(grasps, draws: EvaluationDraws, settings: GraspSettings, lift
     cannot open further). A draw fails, in this order, when a jaw starts inside the
     shape (too_wide), when no object lies between the jaws (missed), when a contact
     normal is undefined (degenerate_normal), when the plates' contact patches are not in
-    force closure (friction_cone; harness.grasp.plate_closure), and then, in force
-    closure, when the weight slides the object out (weight_slip) or turns it back onto
-    the table (weight_torque) (harness.lift, with the shape sample's area and centre of
-    mass and draw i's pressure deviates).
+    force closure (friction_cone; harness.grasp.plate_closure) and, with the lift, the
+    plates' squeeze does not turn them into it either (harness.squeeze), and then, in
+    force closure, when the weight slides the object out (weight_slip) or turns it back
+    onto the table (weight_torque) (harness.lift, with the shape sample's area and centre
+    of mass and draw i's pressure deviates, at the contacts where the squeeze stopped).
+    ``closure`` stays the paper's force closure at the first contacts (P_F).
     ``lift=False`` skips the lift (P_F alone; P_L is then NaN).
     """
     starts = as_starts(grasps)
@@ -248,18 +260,26 @@ def _judge(g1, g2, field, draws: EvaluationDraws, settings: GraspSettings, lift:
     reason[ok & ~closure] = FAILURE_REASONS.index("friction_cone")
     lifted = np.zeros(b, dtype=bool)
     pivots = np.zeros(b, dtype=bool)
+    squeezed = np.zeros(b, dtype=bool)
     chance = np.zeros(b)
+    if lift:
+        settled = squeeze(draws.shapes, g1, g2, field, contacts, closure, gamma, settings.jaw_width,
+                          draws.torque_scale)
+        squeezed = settled.squeezed
+        held = closure | squeezed
+        reason[squeezed] = -1
     if lift and held.any():
         regions = draws.shapes.regions
         f = field[held]
-        c1, c2, com = contacts.c1[held], contacts.c2[held], regions.center_of_mass[f]
+        c1, c2, com = settled.c1[held], settled.c2[held], regions.center_of_mass[f]
         reach = regions.extent(f, c1, side_normal(com, c1, c2))
-        verdict = judge(c1, c2, contacts.w1[held], contacts.w2[held], regions.area[f], com, reach, gamma[held],
+        verdict = judge(c1, c2, settled.w1[held], settled.w2[held], regions.area[f], com, reach, gamma[held],
                         draws.pressure[f], settings)
         lifted[held], pivots[held], chance[held] = verdict.lifted, verdict.pivots, verdict.chance
         reason[np.flatnonzero(held)[~verdict.lifted]] = len(PLANAR_REASONS) + verdict.reason[~verdict.lifted]
     return DrawOutcomes(closure.reshape(shape), lifted.reshape(shape) if lift else None, reason.reshape(shape),
-                        pivots.reshape(shape), quality.reshape(shape), chance.reshape(shape) if lift else None)
+                        pivots.reshape(shape), quality.reshape(shape), chance.reshape(shape) if lift else None,
+                        squeezed.reshape(shape))
 
 
 def estimate_p_f(grasps, draws: EvaluationDraws, settings: GraspSettings, lift: bool = True) -> list[QualityEstimate]:

@@ -137,7 +137,7 @@ def test_a_turning_object_is_lifted_only_if_it_hangs_clear_of_the_table():
     assert verdict.reason.tolist() == [-1, 1]
 
 
-def test_p_l_never_exceeds_p_f_and_its_reasons_partition_the_draws():
+def test_a_lifted_draw_is_in_force_closure_or_squeezed_into_it_and_the_reasons_partition_the_draws():
     scene = load_scene("stapler")
     from harness.belief import build_belief
     from harness.quality import default_streams, draw_evaluation
@@ -147,15 +147,16 @@ def test_p_l_never_exceeds_p_f_and_its_reasons_partition_the_draws():
     draws = draw_evaluation(belief, 400, *default_streams(0, "stapler"))
     grasps = np.array([[[-0.03, -0.04], [-0.03, 0.03]], [[0.04, -0.04], [0.04, 0.03]], [[0.0, -0.04], [0.0, 0.03]]])
     out = evaluate_draws(grasps, draws, resolve(scene))
-    for est, lifted, closure in zip(out.estimates, out.lifted, out.closure):
-        assert not (lifted & ~closure).any()
-        assert est.p_l <= est.p_f
+    for est, lifted, closure, squeezed in zip(out.estimates, out.lifted, out.closure, out.squeezed):
+        assert not (lifted & ~(closure | squeezed)).any() and not (closure & squeezed).any()
+        assert est.squeezed == squeezed.sum()
+        assert est.p_l <= est.p_f + est.squeezed / 400
         assert round(est.p_l * 400) + sum(est.failures.values()) == 400
         assert est.p_l_ci_low <= est.p_l <= est.p_l_ci_high
     # A weightless object lifts whenever it is in force closure.
     light = replace(resolve(scene), density=1e-9)
     out = evaluate_draws(grasps, draws, light)
-    np.testing.assert_array_equal(out.lifted, out.closure)
+    np.testing.assert_array_equal(out.lifted, out.closure | out.squeezed)
 
 
 def test_the_smooth_lift_is_the_average_of_the_draws_verdicts():

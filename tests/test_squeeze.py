@@ -1,0 +1,122 @@
+"""The plates' squeeze on an ellipse turned between parallel plates (against the closed
+form of its width and a brute-force search of the turned grasps), and its place in P_L
+(never in P_F)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import shapely
+
+from harness.geometry import Grid, grid_sdf, grid_sdf_gradient
+from harness.grasp import SDFBatch, find_contacts, plate_closure
+from harness.quality import FAILURE_REASONS, EvaluationDraws, evaluate_draws
+from harness.scene import load_scene
+from harness.settings import resolve
+from harness.squeeze import SQUEEZE_LIMIT, SQUEEZE_STEP, squeeze
+
+A, B = 0.030, 0.015  # semi-axes along x and y
+JAW = 0.01
+GRID = Grid(200, 0.1)  # 0.5 mm cells
+
+
+@pytest.fixture(scope="module")
+def ellipse() -> SDFBatch:
+    t = np.linspace(0.0, 2 * math.pi, 2000, endpoint=False)
+    shape = shapely.Polygon(np.column_stack([A * np.cos(t), B * np.sin(t)]))
+    return SDFBatch(GRID, grid_sdf(shape, GRID)[None], grid_sdf_gradient(shape, GRID)[None])
+
+
+def jaws(theta, half=0.045):
+    """Jaw starts (1, 2) each, closing along u = (sin theta, cos theta) through the centre:
+    theta from the minor axis."""
+    u = np.array([math.sin(theta), math.cos(theta)])
+    return (-half * u)[None], (half * u)[None]
+
+
+def run(fields, theta, friction):
+    g1, g2 = jaws(theta)
+    contacts = find_contacts(fields, g1, g2, JAW)
+    closed, _ = plate_closure(contacts, friction, np.zeros(2), 0.05)
+    return contacts, closed, squeeze(fields, g1, g2, 0, contacts, closed, friction, JAW, 0.05)
+
+
+def width(theta):
+    """The ellipse's width along (sin theta, cos theta): 2 sqrt(A^2 s^2 + B^2 c^2)."""
+    return 2 * math.hypot(A * math.sin(theta), B * math.cos(theta))
+
+
+def test_an_ellipse_turns_towards_its_minor_axis_until_the_plates_are_in_force_closure(ellipse):
+    """Off its minor axis the plates' pushes make a couple that turns the ellipse towards
+    it, where its width is least (the squeeze; the centre of mass is the centre, so the
+    grasp stays through it). The turn is the first whole step at which the turned grasp
+    is in force closure, found here by judging every turned grasp on its own; the
+    settled contacts lie the ellipse's closed-form width apart at theta0 - turn, and
+    turning the other way would never have closed."""
+    mu, theta0 = 0.2, math.radians(20.0)
+    steps = np.arange(1, int(round(SQUEEZE_LIMIT / SQUEEZE_STEP)) + 1) * SQUEEZE_STEP
+    for sense in (-1.0, 1.0):  # towards the minor axis, then away from it
+        turned = [run(ellipse, theta0 + sense * a, mu)[1][0] for a in steps]
+        if sense < 0:
+            expected = steps[turned.index(True)]
+        else:
+            assert not any(turned)
+    contacts, closed, out = run(ellipse, theta0, mu)
+    assert not closed[0] and out.squeezed[0]
+    assert out.turn[0] == pytest.approx(expected, abs=1e-9)
+    assert 0 < expected < theta0
+    theta = theta0 - out.turn[0]
+    u = np.array([math.sin(theta), math.cos(theta)])
+    assert float((out.c2[0] - out.c1[0]) @ u) == pytest.approx(width(theta), abs=2e-4)
+    assert width(theta) < width(theta0)
+
+
+def test_a_grasp_in_force_closure_is_not_squeezed(ellipse):
+    contacts, closed, out = run(ellipse, math.radians(4.0), 0.2)
+    assert closed[0] and not out.squeezed[0] and out.turn[0] == 0.0
+    np.testing.assert_array_equal(out.c1, contacts.c1)
+    np.testing.assert_array_equal(out.c2, contacts.c2)
+
+
+def test_without_friction_the_squeeze_stops_where_the_couple_vanishes(ellipse, monkeypatch):
+    """With mu = 0 no two contacts are in force closure (strictly inside a cone of zero
+    width). From 9 degrees off the minor axis the ellipse turns towards it; on the fourth
+    2-degree step, 1 degree off, both contacts are on the plates' middle line (the
+    support points are 0.8 mm off it, the lines 2.5 mm apart), so the couple vanishes:
+    the squeeze gives up there, after four searches for the contacts instead of the
+    limit's ten, and leaves the first contacts."""
+    import harness.squeeze
+
+    searches = []
+
+    def counted(*args, **kwargs):
+        searches.append(1)
+        return find_contacts(*args, **kwargs)
+
+    monkeypatch.setattr(harness.squeeze, "find_contacts", counted)
+    contacts, closed, out = run(ellipse, math.radians(9.0), 0.0)
+    assert not closed[0] and not out.squeezed[0] and out.turn[0] == 0.0
+    np.testing.assert_array_equal(out.c1, contacts.c1)
+    assert SQUEEZE_STEP == pytest.approx(math.radians(2.0)) and SQUEEZE_LIMIT == pytest.approx(math.radians(20.0))
+    assert len(searches) == 4
+
+
+def test_the_squeeze_counts_in_p_l_and_not_in_p_f(ellipse):
+    """A light ellipse squeezed into closure is lifted (P_L = 1) though out of force
+    closure at the first contacts (P_F = 0); without the lift nothing is squeezed."""
+    n = 8
+    draws = EvaluationDraws(SDFBatch(GRID, np.repeat(ellipse.values, n, axis=0),
+                                     np.repeat(np.stack([ellipse.gx, ellipse.gy], axis=-1), n, axis=0)),
+                            np.zeros((n, 2, 2)), np.zeros(n), np.full((n, 2), 0.5), 0.05)
+    settings = replace(resolve(load_scene("disk"), {"sigma_g": 0.0, "friction": 0.2}), density=1.0)
+    grasp = np.stack(jaws(math.radians(20.0)), axis=1)[0]
+    out = evaluate_draws(grasp, draws, settings)
+    est = out.estimates[0]
+    assert est.p_f == 0.0 and est.p_l == 1.0 and est.squeezed == n
+    assert (out.reason == -1).all() and sum(est.failures.values()) == 0
+    only_p_f = evaluate_draws(grasp, draws, settings, lift=False)
+    assert not only_p_f.squeezed.any()
+    assert (only_p_f.reason == FAILURE_REASONS.index("friction_cone")).all()
