@@ -462,7 +462,7 @@ def force_closure(c1, c2, n1, n2, friction) -> np.ndarray:
     return (length > 0) & in_cone1 & in_cone2
 
 
-def plate_closure(contacts: Contacts, friction, com, torque_scale: float):
+def plate_closure(contacts: Contacts, friction, com, torque_scale: float, with_quality: bool = True):
     """Force closure of the plates' contact patches, and its Ferrari-Canny quality.
 
     A plate pressed on a flat patch can push anywhere on it (the pressure over a rigid
@@ -474,7 +474,8 @@ def plate_closure(contacts: Contacts, friction, com, torque_scale: float):
     patches' points are the first contacts and the other touching lines' crossings; for
     point and curved contacts (one line per patch) this is the first contacts' force
     closure and quality. friction: float or (B,); com: (2,) or (B, 2). Returns closure
-    (B,) and quality (B,), 0 out of closure."""
+    (B,) and quality (B,), 0 out of closure (and everywhere with ``with_quality=False``, which
+    skips computing it)."""
     b = len(contacts.status)
     friction = np.broadcast_to(np.asarray(friction, dtype=float), (b,))
     com = np.broadcast_to(np.asarray(com, dtype=float), (b, 2))
@@ -492,6 +493,8 @@ def plate_closure(contacts: Contacts, friction, com, torque_scale: float):
     ok = contacts.status == OK
     closure[ok] = force_closure(p1[ok], p2[ok], contacts.n1[ok], contacts.n2[ok], friction[ok])
     quality = np.zeros(b)
+    if not with_quality:
+        return closure, quality
     quality[closure] = ferrari_canny(p1[closure], p2[closure], contacts.n1[closure], contacts.n2[closure],
                                      friction[closure], com[closure], torque_scale)
     return closure, quality
