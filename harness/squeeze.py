@@ -61,7 +61,7 @@ def squeeze(fields: SDFBatch, g1, g2, field_index, contacts: Contacts, closure, 
     com = fields.regions.center_of_mass[field_index]
     out = Squeeze(np.zeros(b, dtype=bool), np.zeros(b), contacts.c1.copy(), contacts.c2.copy(), contacts.w1.copy(),
                   contacts.w2.copy())
-    turning = _couple(contacts.c1, contacts.c2, g1, g2)
+    turning = _couple(*_pushes(contacts), g1, g2)
     active = (contacts.status == OK) & ~np.asarray(closure, dtype=bool) & (turning != 0) & np.isfinite(com[:, 0])
     last1, last2 = contacts.c1.copy(), contacts.c2.copy()
     angle = 0.0
@@ -79,7 +79,7 @@ def squeeze(fields: SDFBatch, g1, g2, field_index, contacts: Contacts, closure, 
         found = find_contacts(fields, h1, h2, jaw_width, field_index=field_index[idx])
         closed, _ = plate_closure(found, friction[idx], com[idx], torque_scale, with_quality=False)
         lost = found.status != OK
-        reversed_ = ~lost & (_couple(found.c1, found.c2, h1, h2) != turning[idx])
+        reversed_ = ~lost & (_couple(*_pushes(found), h1, h2) != turning[idx])
         last1[idx], last2[idx] = found.c1, found.c2
         done = idx[closed]
         out.squeezed[done] = True
@@ -90,9 +90,23 @@ def squeeze(fields: SDFBatch, g1, g2, field_index, contacts: Contacts, closure, 
     return out
 
 
+def _pushes(contacts: Contacts) -> tuple[np.ndarray, np.ndarray]:
+    """Where each plate's push acts (B, 2 each): the centre of its contact patch (the
+    resultant of an even pressure over it), the first contact for a point or curved
+    contact (one plate line touching)."""
+    out = []
+    for c, patch, width in ((contacts.c1, contacts.patch1, contacts.w1), (contacts.c2, contacts.patch2, contacts.w2)):
+        touching = np.isfinite(patch[:, :, 0])
+        count = touching.sum(axis=1)
+        centre = np.where(touching[:, :, None], patch, 0.0).sum(axis=1) / np.maximum(count, 1)[:, None]
+        out.append(np.where(((width > 0) & (count > 1))[:, None], centre, c))
+    return out[0], out[1]
+
+
 def _couple(c1, c2, g1, g2) -> np.ndarray:
-    """The sense (B,) in which the plates' pushes along u = g2 - g1 turn the object: the
-    sign of (c1 - c2) x u (+1 counter-clockwise, 0 for contacts on one line along u)."""
+    """The sense (B,) in which the plates' pushes along u = g2 - g1, at c1 and c2, turn the
+    object: the sign of (c1 - c2) x u (+1 counter-clockwise, 0 for pushes on one line
+    along u)."""
     d = np.asarray(g2) - np.asarray(g1)
     e = np.asarray(c1) - np.asarray(c2)
     with np.errstate(invalid="ignore"):
