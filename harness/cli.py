@@ -55,6 +55,7 @@ _coordinate = _checked(float, math.isfinite, "a finite coordinate in metres")
 _sizes = _checked(lambda t: [int(v) for v in t.split(",")], lambda v: len(v) > 0,
                   "comma-separated integers like 25,40,55")
 _study_seeds = _checked(int, lambda v: 0 <= v <= 1000, "an integer from 0 to 1000")
+_study_candidates = _checked(int, lambda v: 1 <= v <= 10_000, "an integer from 1 to 10000")
 _names = _checked(lambda t: [v.strip() for v in t.split(",")], lambda v: all(v),
                   "comma-separated scene names like disk,tape")
 
@@ -344,7 +345,7 @@ def _bench(args) -> int:
     from harness import bench
 
     results = bench.run(args.which, exact_max_mb=args.exact_max_mb, sizes=args.sizes, seeds=args.seeds,
-                        scenes=args.scenes)
+                        scenes=args.scenes, candidates=args.candidates)
     if args.json:
         print(json.dumps(results, indent=2))
     else:
@@ -462,6 +463,9 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--scenes", type=_names, default=None,
                        help="the bandit study's scenes, comma-separated: library names or shared_<outline> "
                             "(default: the library and every outline in ../shared/objects)")
+    bench.add_argument("--candidates", type=_study_candidates, default=None,
+                       help="candidate grasps (arms) per run of the bandit study (default 100, gp-p's; "
+                            "Laskey et al. used 1000)")
     bench.set_defaults(func=_bench)
     return parser
 

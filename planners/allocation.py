@@ -25,6 +25,14 @@ POLICIES = ("thompson", "gittins", "ucb", "uniform", "pruning")
 #: draw inside gp-p (one vectorised evaluation per round has a fixed cost of ~2 ms).
 FIRST_ROUND = 20
 ROUND_GROWTH = 0.25
+#: Thompson rounds (thompson_counts): the threshold is this lower quantile of the leading
+#: arms' posteriors, the THOMPSON_LEADERS arms of highest posterior mean; an arm's value
+#: above it is drawn by rejection when it lies above with at least THOMPSON_REJECT
+#: probability; rounds of at most THOMPSON_DIRECT (arms x draws) values draw them all.
+THOMPSON_QUANTILE = 1e-3
+THOMPSON_LEADERS = 4
+THOMPSON_REJECT = 0.25
+THOMPSON_DIRECT = 2000
 #: The Gittins table holds every state of up to this many pulls (Beta(1,1) prior); beyond
 #: it the exploration bonus decays as 1 / (pulls + 3), the rate of Brezzi & Lai's (2002)
 #: approximation, from the table's last row.
@@ -125,7 +133,8 @@ def round_counts(policy: str, arms: Arms, k: int, used: int, rng: np.random.Gene
     """Pulls (A,) each arm takes in a round of at most k pulls (never beyond its room).
 
     - thompson: k posterior draws of every arm's success probability; each pull goes to
-      the arm whose draw is highest (an arm may win several; parallel Thompson sampling).
+      the arm whose draw is highest (an arm may win several; parallel Thompson sampling;
+      drawn by :func:`thompson_counts`).
     - gittins, ucb: the k largest index values, an arm's m-th pull in the round valued
       at its index after m pulls whose outcomes equal its posterior mean (the believer's
       batch: within a round an arm's index falls only with its pulls).
@@ -136,9 +145,9 @@ def round_counts(policy: str, arms: Arms, k: int, used: int, rng: np.random.Gene
     """
     room = arms.room
     if policy == "thompson":
-        theta = rng.beta(arms.alpha, arms.beta, size=(k, len(arms)))
-        theta[:, room == 0] = -1.0
-        counts = np.bincount(np.argmax(theta, axis=1), minlength=len(arms))
+        live = np.flatnonzero(room > 0)
+        counts = np.zeros(len(arms), dtype=np.int64)
+        counts[live] = thompson_counts(arms.alpha[live], arms.beta[live], k, rng)
     elif policy in ("gittins", "ucb"):
         counts = _believer_counts(arms, k, room, _index_function(policy, used, discount))
     elif policy == "uniform":
@@ -153,6 +162,103 @@ def round_counts(policy: str, arms: Arms, k: int, used: int, rng: np.random.Gene
     else:
         raise ValueError(f"policy must be one of {', '.join(POLICIES)}, got {policy!r}")
     return np.minimum(counts, room)
+
+
+def thompson_counts(alpha: np.ndarray, beta: np.ndarray, k: int, rng: np.random.Generator,
+                    quantile: float = THOMPSON_QUANTILE) -> np.ndarray:
+    """How many of k independent posterior draws each of A Beta(alpha, beta) arms wins
+    (the largest value of the draw's A values): parallel Thompson sampling's round, exact
+    in distribution, at a cost that grows with the arms that can win rather than with A.
+
+    A threshold tau is set at the ``quantile`` lower quantile of the arms with the highest
+    posterior means (THOMPSON_LEADERS of them), so that in a draw some arm exceeds it
+    but with probability below ``quantile``. Arm a exceeds it with probability
+    p_a = I_{1 - tau}(beta_a, alpha_a), independently in every draw: which draws it
+    exceeds in is a Bernoulli process, drawn as geometric gaps. Only those (draw, arm)
+    pairs get a value, from the arm's posterior conditioned above tau: by rejection when
+    p_a >= THOMPSON_REJECT (at most 1 / p_a tries), in closed form when alpha = 1 or
+    beta = 1 (the CDF is a power), else by the inverse CDF. A draw's winner is its largest
+    value. A draw where no arm exceeds tau draws every arm conditioned below it (inverse
+    CDF). With few arms or few draws (A k <= THOMPSON_DIRECT) every value is drawn."""
+    alpha = np.asarray(alpha, dtype=float)
+    beta = np.asarray(beta, dtype=float)
+    a = len(alpha)
+    if a == 0 or k <= 0:
+        return np.zeros(a, dtype=np.int64)
+    if a == 1:
+        return np.array([k], dtype=np.int64)
+    if a * k <= THOMPSON_DIRECT:
+        theta = rng.beta(alpha, beta, size=(k, a))
+        return np.bincount(np.argmax(theta, axis=1), minlength=a)
+    mean = alpha / (alpha + beta)
+    leaders = np.argsort(-mean, kind="stable")[:THOMPSON_LEADERS]
+    tau = float(special.betaincinv(alpha[leaders], beta[leaders], quantile).max())
+    tail = special.betainc(beta, alpha, 1.0 - tau)  # P(theta_a > tau)
+    draw, arm = _bernoulli_process(tail, k, rng)
+    value = _above(alpha[arm], beta[arm], tail[arm], tau, rng)
+    winners = np.full(k, -1, dtype=np.int64)
+    order = np.lexsort((-value, draw))
+    first = order[np.r_[True, draw[order][1:] != draw[order][:-1]]] if len(order) else order
+    winners[draw[first]] = arm[first]
+    empty = np.flatnonzero(winners < 0)
+    if len(empty):  # no arm above tau (probability below the quantile): all below it
+        u = rng.random((len(empty), a)) * special.betainc(alpha, beta, tau)
+        theta = special.betaincinv(alpha, beta, u)
+        winners[empty] = np.argmax(theta, axis=1)
+    return np.bincount(winners, minlength=a)
+
+
+def _bernoulli_process(p: np.ndarray, k: int, rng: np.random.Generator):
+    """Independent Bernoulli(p[a]) trials in draws 0..k-1 of every arm a: the (draw, arm)
+    pairs of the successes, from geometric gaps between them."""
+    a = len(p)
+    active = np.flatnonzero(p > 0)
+    last = np.full(a, -1, dtype=np.int64)  # each arm's last success so far
+    draws, arms = [], []
+    while len(active):
+        q = p[active]
+        mean = (k - 1 - last[active]) * q
+        m = np.ceil(mean + 4.0 * np.sqrt(mean) + 4.0).astype(np.int64)
+        rep = np.repeat(active, m)
+        gaps = np.minimum(rng.geometric(np.repeat(q, m)), k + 1)  # a longer gap ends the k draws alike
+        ends = np.cumsum(m)
+        total = np.cumsum(gaps)
+        offset = np.repeat(np.concatenate([[0], total[ends[:-1] - 1]]), m)
+        position = np.repeat(last[active], m) + total - offset
+        keep = position < k
+        draws.append(position[keep])
+        arms.append(rep[keep])
+        reached = position[ends - 1]  # where each arm's last gap ended
+        last[active] = np.where(reached < k, reached, last[active])
+        active = active[reached < k]  # these may succeed again within the k draws
+    return np.concatenate(draws) if draws else np.zeros(0, np.int64), \
+        np.concatenate(arms) if arms else np.zeros(0, np.int64)
+
+
+def _above(alpha: np.ndarray, beta: np.ndarray, tail: np.ndarray, tau: float, rng: np.random.Generator):
+    """One value from each Beta(alpha, beta) conditioned above tau, whose probability
+    there is ``tail`` (see :func:`thompson_counts` for the three ways)."""
+    value = np.empty(len(alpha))
+    reject = tail >= THOMPSON_REJECT
+    todo = np.flatnonzero(reject)
+    while len(todo):
+        x = rng.beta(alpha[todo], beta[todo])
+        ok = x > tau
+        value[todo[ok]] = x[ok]
+        todo = todo[~ok]
+    rest = np.flatnonzero(~reject)
+    u = rng.random(len(rest))
+    al, be, p = alpha[rest], beta[rest], tail[rest]
+    # beta = 1: P(theta > x) = 1 - x^alpha; alpha = 1: P(theta > x) = (1 - x)^beta.
+    with np.errstate(divide="ignore", invalid="ignore"):
+        power_b = (1.0 - u * p) ** (1.0 / al)  # 1 - theta^alpha = u p  (beta = 1)
+        power_a = 1.0 - (u * p) ** (1.0 / be)  # (1 - theta)^beta = u p  (alpha = 1)
+    general = (al != 1.0) & (be != 1.0)
+    inverse = np.empty(len(rest))
+    if general.any():
+        inverse[general] = 1.0 - special.betaincinv(be[general], al[general], u[general] * p[general])
+    value[rest] = np.where(be == 1.0, power_b, np.where(al == 1.0, power_a, inverse))
+    return value
 
 
 def prune(arms: Arms, z: float = Z95) -> None:

@@ -6,20 +6,22 @@ draws, determinism, the conformance kit, an experiment, and the study's measures
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
 import pandas as pd
 import pytest
-from scipy import integrate
+from scipy import integrate, special, stats
 
 from harness.errors import InputError
 from harness.quality import draw_evaluation, estimate_p_f
 from harness.seeding import stream
 from harness.testing import check_planner
 from planners import candidates as cand
-from planners.allocation import (GITTINS_PULLS, POLICIES, Arms, allocate, bayes_ucb_index, gittins_index,
-                                 gittins_table, round_counts)
+from planners import allocation
+from planners.allocation import (GITTINS_PULLS, POLICIES, THOMPSON_QUANTILE, Arms, allocate, bayes_ucb_index,
+                                 gittins_index, gittins_table, round_counts, thompson_counts)
 from planners.base import Problem
 from planners.gp_bandit import GPBandit
 from planners.gp_p import GPP
@@ -175,6 +177,71 @@ def test_thompson_rounds_follow_the_posterior_probability_of_being_best():
     assert abs(counts[0] - 20_000 * p) < 5 * math.sqrt(20_000 * p * (1 - p))
 
 
+def _win_probabilities(alpha, beta):
+    """P(arm a's posterior draw is the largest), by quadrature of f_a prod_b F_b."""
+    out = []
+    for i in range(len(alpha)):
+        def integrand(x, i=i):
+            others = [stats.beta.cdf(x, alpha[j], beta[j]) for j in range(len(alpha)) if j != i]
+            return stats.beta.pdf(x, alpha[i], beta[i]) * np.prod(others)
+        means = sorted(set(np.round(alpha / (alpha + beta), 12)))
+        out.append(integrate.quad(integrand, 0, 1, points=means, limit=500, epsabs=1e-12)[0])
+    return np.array(out)
+
+
+@pytest.mark.parametrize("quantile", [THOMPSON_QUANTILE, 0.3])
+def test_thompson_rounds_match_the_win_probabilities_by_quadrature(quantile):
+    """Eleven arms whose draws above the threshold take every way (rejection, the two
+    power laws, the inverse CDF), and a quantile of 0.3 that sends about a third of the
+    draws below it: 400,000 pulls split as the integrated win probabilities (chi-square,
+    10 degrees of freedom, p > 0.001; the two arms that win with probability below 1e-6
+    pooled with the others)."""
+    alpha = np.array([1.0, 1, 2, 1, 40, 200, 30, 6, 3, 11, 95])
+    beta = np.array([1.0, 1, 1, 3, 1, 2, 2, 1, 4, 1, 5])
+    p = _win_probabilities(alpha, beta)
+    assert p.sum() == pytest.approx(1.0, abs=1e-9)
+    n = 400_000
+    counts = thompson_counts(alpha, beta, n, np.random.default_rng(5), quantile=quantile)
+    assert counts.sum() == n
+    big = p > 1e-6
+    observed = np.append(counts[big], counts[~big].sum())
+    expected = n * np.append(p[big], p[~big].sum())
+    chi2 = ((observed - expected) ** 2 / expected).sum()
+    assert stats.chi2.sf(chi2, len(observed) - 1) > 1e-3, (counts, n * p)
+
+
+@pytest.mark.parametrize("a, b", [(1.0, 1.0), (7.0, 1.0), (1.0, 4.0), (3.0, 2.0), (60.0, 3.0)])
+def test_a_posterior_draw_above_the_threshold_has_the_conditional_law(a, b):
+    """Draws of Beta(a, b) conditioned above tau (tails from 0.5 % to 90 %, so every way of
+    drawing them) against the conditional CDF (F(x) - F(tau)) / (1 - F(tau)):
+    Kolmogorov-Smirnov p > 0.001 on 20,000 draws at each of three thresholds."""
+    for tau in (0.3, 0.8, 0.97):
+        tail = special.betainc(b, a, 1.0 - tau)
+        if tail < 1e-4:
+            continue
+        x = allocation._above(np.full(20_000, a), np.full(20_000, b), np.full(20_000, tail), tau,
+                              np.random.default_rng(7))
+        assert x.min() > tau and x.max() <= 1.0
+        low = stats.beta.cdf(tau, a, b)
+        p = stats.kstest(x, lambda v: (stats.beta.cdf(v, a, b) - low) / (1.0 - low)).pvalue
+        assert p > 1e-3, (a, b, tau, tail, p)
+
+
+def test_the_bernoulli_process_of_the_threshold_has_binomial_counts():
+    """Successes of Bernoulli(p) in each of 1000 draws, for 2000 arms per p: no draw twice,
+    all of them at p = 1, none at p = 0, and the mean count within 5 standard errors of
+    1000 p."""
+    ps = np.repeat([0.0, 1e-4, 0.02, 0.5, 0.97, 1.0], 2000)
+    draw, arm = allocation._bernoulli_process(ps, 1000, np.random.default_rng(11))
+    assert draw.min() >= 0 and draw.max() < 1000
+    assert len(np.unique(arm * 1000 + draw)) == len(draw)
+    counts = np.bincount(arm, minlength=len(ps)).reshape(6, 2000)
+    assert counts[0].sum() == 0 and (counts[-1] == 1000).all()
+    for row, p in zip(counts, (0.0, 1e-4, 0.02, 0.5, 0.97, 1.0)):
+        se = math.sqrt(1000 * p * (1 - p) / 2000)
+        assert abs(row.mean() - 1000 * p) <= 5 * se + 1e-12, (p, row.mean())
+
+
 def test_no_arm_is_pulled_beyond_its_draws():
     arms = allocate(lambda arm, draw: (np.ones(len(arm), dtype=bool), np.zeros(len(arm))), Arms.fresh(3, 7),
                     "thompson", 100, 50, np.random.default_rng(0))
@@ -303,9 +370,10 @@ def test_the_study_refuses_unknown_scenes_before_any_work(capsys):
     from harness.cli import main
 
     for argv in (["bench", "bandit", "--scenes", "disk,no_such_scene"], ["bench", "bandit", "--seeds", "-1"],
-                 ["bench", "bandit", "--scenes", "shared_no_such_outline"]):
+                 ["bench", "bandit", "--scenes", "shared_no_such_outline"], ["bench", "bandit", "--candidates", "0"]):
         assert main(argv) == 2, argv
         err = capsys.readouterr().err
         assert len(err.strip().splitlines()) == 1 and err.startswith("gpis-harness: error: "), (argv, err)
-    assert main(["bench", "bandit", "--seeds", "0", "--scenes", "disk", "--json"]) == 0
-    assert '"summary": null' in capsys.readouterr().out
+    assert main(["bench", "bandit", "--seeds", "0", "--scenes", "disk", "--candidates", "1000", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["summary"] is None and out["candidates"] == 1000

@@ -186,11 +186,13 @@ def _planner_row(scene_name: str, size: int) -> dict:
     return out
 
 
-def planning(sizes=PLANNING_SIZES, scene: str = SAMPLING_SCENE, seeds: int | None = None, scenes=None) -> dict:
+def planning(sizes=PLANNING_SIZES, scene: str = SAMPLING_SCENE, seeds: int | None = None, scenes=None,
+             candidates: int | None = None) -> dict:
     """Seconds per P_F and per P_L estimate (1000 paired draws), per SCP initialisation and
     per GP-P candidate over grid sizes, with their growth; the convergence study; gp-gpis-opt
     against gp-p, both planning for the lift, over the library; and the bandit study
-    (:func:`bandit`, ``seeds`` and ``scenes`` its size; ``seeds = 0`` skips it)."""
+    (:func:`bandit`, ``seeds``, ``scenes`` and ``candidates`` its size; ``seeds = 0`` skips
+    it)."""
     from harness.scene import library_names, load_scene
 
     study_names = _bandit_scenes(scenes)
@@ -217,7 +219,7 @@ def planning(sizes=PLANNING_SIZES, scene: str = SAMPLING_SCENE, seeds: int | Non
             "planner_scene": PLANNER_SCENE, "scp_s_per_init": scp, "gpp_s_per_candidate": gpp,
             "scp_over_gpp": {m: scp[m] / gpp[m] for m in scp},
             "scp_growth_exponent": growth(list(scp.values())), **_convergence_summary(convergence),
-            "lift_planners": _lift_summary(lift_rows), "bandit": bandit(seeds, study_names)}
+            "lift_planners": _lift_summary(lift_rows), "bandit": bandit(seeds, study_names, candidates)}
 
 
 def _bandit_scenes(scenes) -> list[str]:
@@ -230,20 +232,23 @@ def _bandit_scenes(scenes) -> list[str]:
     return names
 
 
-def bandit(seeds: int | None = None, scenes=None) -> dict:
+def bandit(seeds: int | None = None, scenes=None, candidates: int | None = None) -> dict:
     """The bandit convergence study (harness/bench/bandit_study.py): per scene (one process
     each) and seed, every gp-bandit policy's best grasp after every round judged on 1000
     evaluation draws against gp-p's choice; the draws and seconds to within 1 % and 3 %,
-    and the default planners' plan times. ``seeds`` (default 3; 0 skips the study) and
-    ``scenes`` (default: the library and the shared outlines) set its size."""
+    and the default planners' plan times. ``seeds`` (default 3; 0 skips the study),
+    ``scenes`` (default: the library and the shared outlines) and ``candidates`` (the arms
+    of every run; default 100, gp-p's) set its size."""
     from harness.bench import bandit_study
 
     seeds = bandit_study.SEEDS if seeds is None else seeds
+    candidates = bandit_study.CANDIDATES if candidates is None else int(candidates)
     names = _bandit_scenes(scenes)
     if seeds == 0 or not names:
-        return {"seeds": seeds, "scenes": names, "runs": [], "summary": None}
-    runs = [run for name in names for run in _in_fresh_process(bandit_study.scene_runs, name, seeds)]
-    return {"seeds": seeds, "scenes": names, "tolerances": list(bandit_study.TOLERANCES),
+        return {"seeds": seeds, "scenes": names, "candidates": candidates, "runs": [], "summary": None}
+    runs = [run for name in names
+            for run in _in_fresh_process(bandit_study.scene_runs, name, seeds, candidates)]
+    return {"seeds": seeds, "scenes": names, "candidates": candidates, "tolerances": list(bandit_study.TOLERANCES),
             "adaptive_budget": bandit_study.ADAPTIVE_BUDGET, "runs": runs, "summary": bandit_study.summarise(runs)}
 
 
@@ -411,16 +416,18 @@ def lift(trials: int = 16, seed: int = 0) -> dict:
     return {**validate(trials=trials, seed=seed), "manifold_levers": manifold_levers(seed=seed)}
 
 
-def run(which: str = "all", exact_max_mb: float = 2500.0, sizes=None, seeds: int | None = None, scenes=None) -> dict:
-    """Run the named benchmark(s); returns a JSON-ready dict. ``seeds`` and ``scenes`` size
-    the bandit study (``bandit``, and inside ``planning``)."""
+def run(which: str = "all", exact_max_mb: float = 2500.0, sizes=None, seeds: int | None = None, scenes=None,
+        candidates: int | None = None) -> dict:
+    """Run the named benchmark(s); returns a JSON-ready dict. ``seeds``, ``scenes`` and
+    ``candidates`` size the bandit study (``bandit``, and inside ``planning``)."""
     results = {}
     if which in ("sampling", "all"):
         results["sampling"] = sampling(tuple(sizes or SAMPLING_SIZES), exact_max_mb)
     if which in ("planning", "all"):
-        results["planning"] = planning(tuple(sizes or PLANNING_SIZES), seeds=seeds, scenes=scenes)
+        results["planning"] = planning(tuple(sizes or PLANNING_SIZES), seeds=seeds, scenes=scenes,
+                                        candidates=candidates)
     if which == "bandit":
-        results["bandit"] = bandit(seeds, scenes)
+        results["bandit"] = bandit(seeds, scenes, candidates)
     if which in ("quality", "all"):
         results["quality"] = quality()
     if which in ("physics", "all"):
@@ -527,7 +534,8 @@ def _bandit_lines(res: dict) -> list[str]:
     def num(v, fmt):
         return "never" if v is None else format(v, fmt)
 
-    lines = [f"bandit study: {summary['runs']} runs ({len(res['scenes'])} scenes x {res['seeds']} seeds); the best "
+    lines = [f"bandit study: {summary['runs']} runs ({len(res['scenes'])} scenes x {res['seeds']} seeds, "
+             f"{res.get('candidates', 100)} candidates each); the best "
              f"grasp after every round judged on 1000 evaluation draws against gp-p's choice. Draws (and seconds) "
              f"until it stays within 1 % / 3 %: median and 90th percentile over runs (never: not within the "
              f"run's draws), the median of uniform's over the policy's per run, and the share of runs within "

@@ -33,6 +33,9 @@ from planners.registry import make_planner
 #: The shared outlines beside the repository (../shared/objects), when present.
 SHARED_OBJECTS = Path(__file__).resolve().parents[3] / "shared" / "objects"
 SEEDS = 3
+#: Candidates (arms) per run: gp-p's default; ``bench bandit --candidates 1000`` is Laskey
+#: et al.'s count.
+CANDIDATES = 100
 TOLERANCES = (0.01, 0.03)
 #: Draws after which the study reports the share of runs within each tolerance.
 ANYTIME_BUDGETS = (250, 500, 1000, 2000, 5000)
@@ -79,7 +82,7 @@ def scene_of(name: str) -> Scene:
     return parse_scene(data, source=str(path), base_dir=path.parent, default_name=name)
 
 
-def run(name: str, seed: int, candidates: int = 100, samples: int = 1000, budget: int = ADAPTIVE_BUDGET,
+def run(name: str, seed: int, candidates: int = CANDIDATES, samples: int = 1000, budget: int = ADAPTIVE_BUDGET,
         batch: int | None = None, policies=POLICIES, defaults: bool = True) -> dict:
     """One run: every policy's curve (draws, seconds, P_F of its best grasp so far on the
     evaluation draws, kept at the first round, the rounds where that P_F changes and the
@@ -140,12 +143,12 @@ def _defaults(problem: Problem, scene: str, seed: int, p_f) -> dict:
     return out
 
 
-def scene_runs(name: str, seeds: int, **options) -> list[dict]:
+def scene_runs(name: str, seeds: int, candidates: int = CANDIDATES, **options) -> list[dict]:
     """Every seed's run on one scene (one process per scene in the benchmark)."""
     from planners.allocation import gittins_table
 
     gittins_table(GPBandit().discount)  # computed once per process, before any clock starts
-    return [run(name, seed, **options) for seed in range(seeds)]
+    return [run(name, seed, candidates=candidates, **options) for seed in range(seeds)]
 
 
 def reached(curve: list, target: float, tolerance: float):
