@@ -541,7 +541,7 @@ def _bandit_lines(res: dict) -> list[str]:
              f"run's draws), the median of uniform's over the policy's per run, and the share of runs within "
              f"after 1000 draws",
              f"{'policy':<9}{'median':>12}{'p90':>13}{'seconds':>14}{'uniform/pol':>13}{'at 1000':>11}"
-             f"{'pull/draw':>10}{'plan s':>8}"]
+             f"{'pull/draw':>10}{'judging':>9}{'plan s':>8}"]
     for policy, row in summary["policies"].items():
         one, three = row["1pct"], row["3pct"]
 
@@ -551,9 +551,11 @@ def _bandit_lines(res: dict) -> list[str]:
         lines.append(f"{policy:<9}{pair('median_draws', '.0f'):>12}{pair('p90_draws', '.0f'):>13}"
                      f"{pair('median_seconds', '.3f'):>14}{pair('median_uniform_over_policy_draws', '.1f'):>13}"
                      f"{one['within_after']['1000']:>6.2f}/{three['within_after']['1000']:.2f}"
-                     f"{num(row['pull_over_gp_p_draw'], '.2f'):>9}{num(row['median_plan_s'], '.3f'):>8}")
+                     f"{num(row['pull_over_gp_p_draw'], '.2f'):>9}"
+                     f"{num(row.get('judging_over_gp_p'), '.2f'):>9}{num(row['median_plan_s'], '.3f'):>8}")
     lines.append(f"uniform made gp-p's choice in {summary['uniform_is_gp_p']} of {summary['runs']} runs; "
-                 f"pull/draw: seconds per pull (pool included) over gp-p's per draw")
+                 f"pull/draw: seconds per pull over gp-p's per draw, shape samples included; judging: "
+                 f"without them")
     lines.append("library scenes, default parameters: " + ", ".join(
         f"{k} P_F {v['mean_p_f']:.3f} in {num(v['median_plan_s'], '.3f')} s (median; mean {v['mean_plan_s']:.3f})"
         for k, v in summary["library_defaults"].items() if v["runs"]))

@@ -169,7 +169,8 @@ def summarise(runs: list[dict], policies=POLICIES) -> dict:
     infinite statistic is None), how many runs reach it, the median over runs of
     uniform's draws (seconds) over the policy's, and the share of runs within it after
     each of ANYTIME_BUDGETS draws (a budgeted planner's view). Per policy also its seconds
-    per pull (pool included) over gp-p's per draw, and its median plan time. Plus the
+    per pull over gp-p's per draw, with the shape samples (``pull_over_gp_p_draw``) and
+    without them (``judging_over_gp_p``, see :func:`_judging`), and its median plan time. Plus the
     default planners' plan times and P_F on the library scenes (``make eval``'s)."""
     runs = [r for r in runs if "skipped" not in r]
     table = {}
@@ -195,6 +196,7 @@ def summarise(runs: list[dict], policies=POLICIES) -> dict:
         row["pull_over_gp_p_draw"] = _quantile(
             [(r["seconds"][policy]["allocation"] + r["seconds"][policy]["draws"]) / r["curves"][policy][-1][0]
              / (r["gp_p_s"] / r["gp_p_draws"]) for r in runs], 0.5)
+        row["judging_over_gp_p"] = _quantile([_judging(r, policy) / _judging(r, "gp-p") for r in runs], 0.5)
         table[policy] = row
     library = set(library_names())
     defaults = {}
@@ -206,6 +208,18 @@ def summarise(runs: list[dict], policies=POLICIES) -> dict:
     return {"policies": table, "median_gp_p_s": _quantile([r["gp_p_s"] for r in runs], 0.5),
             "uniform_is_gp_p": sum(bool(r.get("uniform_is_gp_p")) for r in runs), "runs": len(runs),
             "library_defaults": defaults}
+
+
+def _judging(run: dict, policy: str) -> float:
+    """Seconds per pull (per draw for "gp-p") without the shape samples: a policy's
+    allocation (choosing the pulls and judging them) over its pulls; gp-p's plan time less
+    the pool of its shape samples (timed as uniform allocation's, which draws the same
+    pool in full) over its draws."""
+    if policy == "gp-p":
+        if "uniform" not in run["seconds"]:
+            return math.nan
+        return (run["gp_p_s"] - run["seconds"]["uniform"]["draws"]) / run["gp_p_draws"]
+    return run["seconds"][policy]["allocation"] / run["curves"][policy][-1][0]
 
 
 def at_draws(curve: list, draws: int) -> float:
