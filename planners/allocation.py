@@ -26,13 +26,14 @@ POLICIES = ("thompson", "gittins", "ucb", "uniform", "pruning")
 FIRST_ROUND = 20
 ROUND_GROWTH = 0.25
 #: Thompson rounds (thompson_counts): the threshold is this lower quantile of the leading
-#: arms' posteriors, the THOMPSON_LEADERS arms of highest posterior mean; an arm's value
-#: above it is drawn by rejection when it lies above with at least THOMPSON_REJECT
-#: probability; rounds of at most THOMPSON_DIRECT (arms x draws) values draw them all.
+#: arms' posteriors, the THOMPSON_LEADERS arms of highest posterior mean. An arm that lies
+#: above it with probability below THOMPSON_SPARSE (THOMPSON_SPARSE_CLOSED when its
+#: conditional law has a closed form) gets values only where it does: an inverse CDF costs
+#: about 16 posterior draws, a closed form about 2 (measured with numpy and scipy here).
 THOMPSON_QUANTILE = 1e-3
 THOMPSON_LEADERS = 4
-THOMPSON_REJECT = 0.25
-THOMPSON_DIRECT = 2000
+THOMPSON_SPARSE = 0.05
+THOMPSON_SPARSE_CLOSED = 0.3
 #: The Gittins table holds every state of up to this many pulls (Beta(1,1) prior); beyond
 #: it the exploration bonus decays as 1 / (pulls + 3), the rate of Brezzi & Lai's (2002)
 #: approximation, from the table's last row.
@@ -168,18 +169,19 @@ def thompson_counts(alpha: np.ndarray, beta: np.ndarray, k: int, rng: np.random.
                     quantile: float = THOMPSON_QUANTILE) -> np.ndarray:
     """How many of k independent posterior draws each of A Beta(alpha, beta) arms wins
     (the largest value of the draw's A values): parallel Thompson sampling's round, exact
-    in distribution, at a cost that grows with the arms that can win rather than with A.
+    in distribution, without drawing the values of arms that cannot win.
 
-    A threshold tau is set at the ``quantile`` lower quantile of the arms with the highest
-    posterior means (THOMPSON_LEADERS of them), so that in a draw some arm exceeds it
-    but with probability below ``quantile``. Arm a exceeds it with probability
-    p_a = I_{1 - tau}(beta_a, alpha_a), independently in every draw: which draws it
-    exceeds in is a Bernoulli process, drawn as geometric gaps. Only those (draw, arm)
-    pairs get a value, from the arm's posterior conditioned above tau: by rejection when
-    p_a >= THOMPSON_REJECT (at most 1 / p_a tries), in closed form when alpha = 1 or
-    beta = 1 (the CDF is a power), else by the inverse CDF. A draw's winner is its largest
-    value. A draw where no arm exceeds tau draws every arm conditioned below it (inverse
-    CDF). With few arms or few draws (A k <= THOMPSON_DIRECT) every value is drawn."""
+    A threshold tau is set at the ``quantile`` lower quantile of the THOMPSON_LEADERS arms
+    of highest posterior mean, so that some arm lies above it in all but a ``quantile``
+    share of the draws. Arm a lies above it with probability p_a = I_{1 - tau}(beta_a,
+    alpha_a). The *dense* arms (p_a at least THOMPSON_SPARSE_CLOSED when alpha or beta
+    is 1, whose conditional law is a power, else THOMPSON_SPARSE) get a value in every
+    draw, as usual. For each *sparse* arm, the draws where it lies above tau are a
+    Bernoulli process (geometric gaps), and only there it gets a value, from its
+    posterior conditioned above tau (closed form or inverse CDF): below tau it cannot beat
+    a dense arm that lies above. A draw where neither does draws the sparse arms
+    conditioned below tau. The cost per draw is the dense arms plus the sparse arms'
+    expected exceedances, instead of A."""
     alpha = np.asarray(alpha, dtype=float)
     beta = np.asarray(beta, dtype=float)
     a = len(alpha)
@@ -187,24 +189,39 @@ def thompson_counts(alpha: np.ndarray, beta: np.ndarray, k: int, rng: np.random.
         return np.zeros(a, dtype=np.int64)
     if a == 1:
         return np.array([k], dtype=np.int64)
-    if a * k <= THOMPSON_DIRECT:
-        theta = rng.beta(alpha, beta, size=(k, a))
-        return np.bincount(np.argmax(theta, axis=1), minlength=a)
     mean = alpha / (alpha + beta)
     leaders = np.argsort(-mean, kind="stable")[:THOMPSON_LEADERS]
     tau = float(special.betaincinv(alpha[leaders], beta[leaders], quantile).max())
     tail = special.betainc(beta, alpha, 1.0 - tau)  # P(theta_a > tau)
-    draw, arm = _bernoulli_process(tail, k, rng)
+    closed = (alpha == 1.0) | (beta == 1.0)
+    sparse = np.flatnonzero(tail < np.where(closed, THOMPSON_SPARSE_CLOSED, THOMPSON_SPARSE))
+    dense = np.setdiff1d(np.arange(a), sparse)
+    # Dense arms: a value in every draw (tau's leaders are among them: their tail is 1 - quantile).
+    theta = rng.beta(alpha[dense], beta[dense], size=(k, len(dense)))
+    pick = np.argmax(theta, axis=1)
+    best = theta[np.arange(k), pick]
+    winners = dense[pick]
+    if len(sparse) == 0:
+        return np.bincount(winners, minlength=a)
+    # Sparse arms: values only where they lie above tau.
+    draw, local = _bernoulli_process(tail[sparse], k, rng)
+    arm = sparse[local]
     value = _above(alpha[arm], beta[arm], tail[arm], tau, rng)
-    winners = np.full(k, -1, dtype=np.int64)
-    order = np.lexsort((-value, draw))
-    first = order[np.r_[True, draw[order][1:] != draw[order][:-1]]] if len(order) else order
-    winners[draw[first]] = arm[first]
-    empty = np.flatnonzero(winners < 0)
-    if len(empty):  # no arm above tau (probability below the quantile): all below it
-        u = rng.random((len(empty), a)) * special.betainc(alpha, beta, tau)
-        theta = special.betaincinv(alpha, beta, u)
-        winners[empty] = np.argmax(theta, axis=1)
+    if len(draw):
+        order = np.lexsort((-value, draw))
+        first = order[np.r_[True, draw[order][1:] != draw[order][:-1]]]
+        beats = value[first] > best[draw[first]]
+        winners[draw[first][beats]] = arm[first][beats]
+    # Draws where no arm lies above tau: the sparse arms' values conditioned below it.
+    seen = np.zeros(k, dtype=bool)
+    seen[draw] = True
+    low = np.flatnonzero(~seen & (best <= tau))
+    if len(low):
+        below = special.betainc(alpha[sparse], beta[sparse], tau)
+        values = special.betaincinv(alpha[sparse], beta[sparse], rng.random((len(low), len(sparse))) * below)
+        j = np.argmax(values, axis=1)
+        beats = values[np.arange(len(low)), j] > best[low]
+        winners[low[beats]] = sparse[j[beats]]
     return np.bincount(winners, minlength=a)
 
 
@@ -237,28 +254,18 @@ def _bernoulli_process(p: np.ndarray, k: int, rng: np.random.Generator):
 
 def _above(alpha: np.ndarray, beta: np.ndarray, tail: np.ndarray, tau: float, rng: np.random.Generator):
     """One value from each Beta(alpha, beta) conditioned above tau, whose probability
-    there is ``tail`` (see :func:`thompson_counts` for the three ways)."""
-    value = np.empty(len(alpha))
-    reject = tail >= THOMPSON_REJECT
-    todo = np.flatnonzero(reject)
-    while len(todo):
-        x = rng.beta(alpha[todo], beta[todo])
-        ok = x > tau
-        value[todo[ok]] = x[ok]
-        todo = todo[~ok]
-    rest = np.flatnonzero(~reject)
-    u = rng.random(len(rest))
-    al, be, p = alpha[rest], beta[rest], tail[rest]
-    # beta = 1: P(theta > x) = 1 - x^alpha; alpha = 1: P(theta > x) = (1 - x)^beta.
+    there is ``tail``: in closed form when beta = 1 (P(theta > x) = 1 - x^alpha) or
+    alpha = 1 (P(theta > x) = (1 - x)^beta), else by the inverse CDF of 1 - theta, a
+    Beta(beta, alpha) variate below 1 - tau."""
+    u = rng.random(len(alpha)) * tail
     with np.errstate(divide="ignore", invalid="ignore"):
-        power_b = (1.0 - u * p) ** (1.0 / al)  # 1 - theta^alpha = u p  (beta = 1)
-        power_a = 1.0 - (u * p) ** (1.0 / be)  # (1 - theta)^beta = u p  (alpha = 1)
-    general = (al != 1.0) & (be != 1.0)
-    inverse = np.empty(len(rest))
+        power_b = (1.0 - u) ** (1.0 / alpha)  # 1 - theta^alpha = u   (beta = 1)
+        power_a = 1.0 - u ** (1.0 / beta)  # (1 - theta)^beta = u  (alpha = 1)
+    general = (alpha != 1.0) & (beta != 1.0)
+    inverse = np.zeros(len(alpha))
     if general.any():
-        inverse[general] = 1.0 - special.betaincinv(be[general], al[general], u[general] * p[general])
-    value[rest] = np.where(be == 1.0, power_b, np.where(al == 1.0, power_a, inverse))
-    return value
+        inverse[general] = 1.0 - special.betaincinv(beta[general], alpha[general], u[general])
+    return np.where(beta == 1.0, power_b, np.where(alpha == 1.0, power_a, inverse))
 
 
 def prune(arms: Arms, z: float = Z95) -> None:

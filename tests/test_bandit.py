@@ -191,11 +191,10 @@ def _win_probabilities(alpha, beta):
 
 @pytest.mark.parametrize("quantile", [THOMPSON_QUANTILE, 0.3])
 def test_thompson_rounds_match_the_win_probabilities_by_quadrature(quantile):
-    """Eleven arms whose draws above the threshold take every way (rejection, the two
-    power laws, the inverse CDF), and a quantile of 0.3 that sends about a third of the
-    draws below it: 400,000 pulls split as the integrated win probabilities (chi-square,
-    10 degrees of freedom, p > 0.001; the two arms that win with probability below 1e-6
-    pooled with the others)."""
+    """Eleven arms, dense and sparse (values above the threshold by both power laws and
+    by the inverse CDF), and a quantile of 0.3 that leaves about a third of the draws
+    with no arm above it: 400,000 pulls split as the integrated win probabilities
+    (chi-square, p > 0.001; the two arms that win with probability below 1e-6 pooled)."""
     alpha = np.array([1.0, 1, 2, 1, 40, 200, 30, 6, 3, 11, 95])
     beta = np.array([1.0, 1, 1, 3, 1, 2, 2, 1, 4, 1, 5])
     p = _win_probabilities(alpha, beta)
@@ -212,8 +211,8 @@ def test_thompson_rounds_match_the_win_probabilities_by_quadrature(quantile):
 
 @pytest.mark.parametrize("a, b", [(1.0, 1.0), (7.0, 1.0), (1.0, 4.0), (3.0, 2.0), (60.0, 3.0)])
 def test_a_posterior_draw_above_the_threshold_has_the_conditional_law(a, b):
-    """Draws of Beta(a, b) conditioned above tau (tails from 0.5 % to 90 %, so every way of
-    drawing them) against the conditional CDF (F(x) - F(tau)) / (1 - F(tau)):
+    """Draws of Beta(a, b) conditioned above tau (tails from 0.5 % to 90 %; both power laws
+    and the inverse CDF) against the conditional CDF (F(x) - F(tau)) / (1 - F(tau)):
     Kolmogorov-Smirnov p > 0.001 on 20,000 draws at each of three thresholds."""
     for tau in (0.3, 0.8, 0.97):
         tail = special.betainc(b, a, 1.0 - tau)
