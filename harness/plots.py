@@ -308,6 +308,6 @@ def bandit_figure(study: dict):
     axes[1].set_ylabel("share of runs within 1 % (solid), 3 % (dashed)")
     axes[1].set_ylim(0.0, 1.02)
     fig.suptitle(f"Bandit allocation of draws (bench planning): {len(runs)} runs, "
-                 f"{len(study.get('scenes', []))} scenes x {study.get('seeds', '?')} seeds; grey lines: 99 % and 97 %",
-                 fontsize=10)
+                 f"{len(study.get('scenes', []))} scenes x {study.get('seeds', '?')} seeds, "
+                 f"{study.get('candidates', 100)} candidates each; grey lines: 99 % and 97 %", fontsize=10)
     return fig
