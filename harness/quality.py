@@ -85,10 +85,14 @@ POOL_BLOCK = 100
 
 
 class DrawPool:
-    """The n paired draws of :func:`draw_evaluation` (the same numbers from the same four
-    generators), drawn in blocks of ``block`` as they are first needed, so that a planner
-    judging most grasps on a few draws pays for the shape samples (and their regions)
-    it uses, not for all n.
+    """The n paired draws of :func:`draw_evaluation` (the same random numbers from the same
+    four generators), drawn in blocks of ``block`` as they are first needed, so that a
+    planner judging most grasps on a few draws pays for the shape samples (and their
+    regions) it uses, not for all n. The shape samples match draw_evaluation's to float32
+    rounding, not always bit for bit: under the pinned BLAS kernels
+    (harness.provenance) a product's rounding can depend on how many samples it holds.
+    gp-p draws its pool through a DrawPool too, so that gp-p and gp-bandit judge the
+    very same numbers.
 
     The approach, friction and pressure deviates are drawn at once (they are cheap). The
     shape samples come block by block when the belief's sampler for n draws is

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from harness.quality import draw_evaluation, estimate_p_f, evaluate_draws
+from harness.quality import DrawPool, estimate_p_f, evaluate_draws
 from planners.base import Plan, Planner, Problem, check_quality
 from planners.sampling import search
 
@@ -34,7 +34,10 @@ class GPP(Planner):
                       estimate_of=lambda best: best, record=record)
 
     def _setup(self, problem: Problem, rng: np.random.Generator):
-        return problem, draw_evaluation(problem.belief, self.samples, *rng.spawn(4))
+        # The pool drawn block by block, as gp-bandit draws it (harness.quality.DrawPool):
+        # under the commands' pinned BLAS kernels a product's rounding can depend on how
+        # many samples it holds, and uniform allocation must judge gp-p's very numbers.
+        return problem, DrawPool(problem.belief, self.samples, *rng.spawn(4)).draws(self.samples)
 
     def _score(self, grasps, state):
         problem, draws = state

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import json
 import math
+import subprocess
+import sys
 
 import numpy as np
 import pandas as pd
@@ -269,6 +271,47 @@ def test_uniform_allocation_reproduces_gp_p_scores_and_choice_on_the_same_draws(
     gpp = GPP(candidates=40, samples=300).plan(problem, stream(4, "marker", "bandit-vs-gp-p"))
     assert plan.grasp == gpp.grasp and plan.status == "ok"
     assert 0.3 < gpp.estimate < 1.0  # a real choice, not a tie at 1
+
+
+_PINNED_UNIFORM_VS_GP_P = """
+from harness.provenance import pin_code_paths
+pin_code_paths()  # what every gpis-harness command does first
+import json
+import numpy as np
+from harness.belief import build_belief
+from harness.scene import load_scene
+from harness.seeding import stream
+from planners.base import Problem
+from planners.gp_bandit import GPBandit
+from planners.gp_p import GPP
+
+scene = load_scene("marker")
+problem = Problem.for_belief(build_belief(scene, stream(4, "marker", 0, "sensor")).prepare())
+bandit = GPBandit(candidates=30, samples=400, policy="uniform", budget_draws=30 * 400, batch=500)
+plan = bandit.plan(problem, stream(4, "marker", "pinned"))
+scores = []
+gpp = GPP(candidates=30, samples=400)
+gpp._score = lambda grasps, state, score=gpp._score: scores.append(score(grasps, state)) or scores[-1]
+choice = gpp.plan(problem, stream(4, "marker", "pinned"))
+p_f = np.concatenate([s[0] for s in scores])
+fc = np.concatenate([s[1] for s in scores])
+print(json.dumps({"successes": (np.abs(bandit.arms_.successes - np.round(p_f * 400))).max().item(),
+                  "tie": np.abs(bandit.arms_.tie / 400 - fc).max().item(),
+                  "same_choice": plan.grasp == choice.grasp}))
+"""
+
+
+def test_uniform_allocation_reproduces_gp_p_under_the_pinned_kernels():
+    """The commands pin BLAS's kernels (harness.provenance), under which a product's
+    rounding can depend on how many samples it holds: gp-p's pool and gp-bandit's,
+    drawn in blocks as pulls reach them, must still be the same numbers. In a fresh
+    process with the pins: every candidate's force-closure count equals gp-p's, its mean
+    Ferrari-Canny quality to 1e-12, and the choice is gp-p's."""
+    proc = subprocess.run([sys.executable, "-c", _PINNED_UNIFORM_VS_GP_P], capture_output=True, text=True,
+                          timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    out = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert out["successes"] == 0 and out["tie"] <= 1e-12 and out["same_choice"], out
 
 
 def test_planning_for_the_lift_counts_the_lifted_draws(beliefs):
