@@ -194,9 +194,10 @@ def thompson_counts(alpha: np.ndarray, beta: np.ndarray, k: int, rng: np.random.
     tau = float(special.betaincinv(alpha[leaders], beta[leaders], quantile).max())
     tail = special.betainc(beta, alpha, 1.0 - tau)  # P(theta_a > tau)
     closed = (alpha == 1.0) | (beta == 1.0)
-    sparse = np.flatnonzero(tail < np.where(closed, THOMPSON_SPARSE_CLOSED, THOMPSON_SPARSE))
+    sparse = np.setdiff1d(np.flatnonzero(tail < np.where(closed, THOMPSON_SPARSE_CLOSED, THOMPSON_SPARSE)),
+                          leaders)
     dense = np.setdiff1d(np.arange(a), sparse)
-    # Dense arms: a value in every draw (tau's leaders are among them: their tail is 1 - quantile).
+    # Dense arms, tau's leaders always among them: a value in every draw.
     theta = rng.beta(alpha[dense], beta[dense], size=(k, len(dense)))
     pick = np.argmax(theta, axis=1)
     best = theta[np.arange(k), pick]

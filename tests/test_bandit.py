@@ -191,12 +191,13 @@ def _win_probabilities(alpha, beta):
     return np.array(out)
 
 
-@pytest.mark.parametrize("quantile", [THOMPSON_QUANTILE, 0.3])
+@pytest.mark.parametrize("quantile", [THOMPSON_QUANTILE, 0.3, 0.99])
 def test_thompson_rounds_match_the_win_probabilities_by_quadrature(quantile):
     """Eleven arms, dense and sparse (values above the threshold by both power laws and
-    by the inverse CDF), and a quantile of 0.3 that leaves about a third of the draws
-    with no arm above it: 400,000 pulls split as the integrated win probabilities
-    (chi-square, p > 0.001; the two arms that win with probability below 1e-6 pooled)."""
+    by the inverse CDF), and quantiles of 0.3 and 0.99 that leave a third of the draws,
+    and nearly all, with no arm above the threshold: 400,000 pulls split as the integrated
+    win probabilities (chi-square, p > 0.001; the two arms that win with probability below
+    1e-6 pooled)."""
     alpha = np.array([1.0, 1, 2, 1, 40, 200, 30, 6, 3, 11, 95])
     beta = np.array([1.0, 1, 1, 3, 1, 2, 2, 1, 4, 1, 5])
     p = _win_probabilities(alpha, beta)
