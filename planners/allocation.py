@@ -22,7 +22,7 @@ POLICIES = ("thompson", "gittins", "ucb", "uniform", "pruning")
 #: Rounds start at FIRST_ROUND pulls and grow by ROUND_GROWTH times the draws spent so
 #: far, up to the caller's batch: the first rounds, whose outcomes change the allocation
 #: most, stay small; the later ones are large enough that a pull costs no more than a
-#: draw inside gp-p (one vectorised evaluation per round has a fixed cost of ~2 ms).
+#: draw inside gp-p (one vectorised evaluation per round has a fixed cost of about 1 ms).
 FIRST_ROUND = 20
 ROUND_GROWTH = 0.25
 #: Thompson rounds (thompson_counts): the threshold is this lower quantile of the leading
