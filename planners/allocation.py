@@ -21,8 +21,8 @@ from harness.quality import Z95, wilson_interval
 POLICIES = ("thompson", "gittins", "ucb", "uniform", "pruning")
 #: Rounds start at FIRST_ROUND pulls and grow by ROUND_GROWTH times the draws spent so
 #: far, up to the caller's batch: the first rounds, whose outcomes change the allocation
-#: most, stay small; the later ones are large enough that a pull costs no more than a
-#: draw inside gp-p (one vectorised evaluation per round has a fixed cost of about 1 ms).
+#: most, stay small; the later ones spread the fixed cost of a round's one vectorised
+#: evaluation (about 1 ms) over many pulls.
 FIRST_ROUND = 20
 ROUND_GROWTH = 0.25
 #: Thompson rounds (thompson_counts): the threshold is this lower quantile of the leading
