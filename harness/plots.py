@@ -265,7 +265,7 @@ def runtime_figure(bench: dict):
 
 
 #: Colours of the bandit policies in the study's figure.
-POLICY_COLOURS = {"thompson": "tab:red", "gittins": "tab:purple", "ucb": "tab:orange", "uniform": "tab:blue",
+POLICY_COLOURS = {"thompson": "tab:red", "thompson-alone": "tab:pink", "gittins": "tab:purple", "ucb": "tab:orange", "uniform": "tab:blue",
                   "pruning": "tab:green"}
 
 

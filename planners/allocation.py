@@ -12,7 +12,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import special
+from scipy import sparse, spatial, special
 
 from harness.quality import Z95, wilson_interval
 
@@ -25,6 +25,14 @@ POLICIES = ("thompson", "gittins", "ucb", "uniform", "pruning")
 #: evaluation (about 1 ms) over many pulls.
 FIRST_ROUND = 20
 ROUND_GROWTH = 0.25
+#: Shared evidence (Thompson sampling, after Dex-Net 1.0's correlated Beta posteriors):
+#: each arm's posterior also counts its neighbours' outcomes, weighted by how much the two
+#: grasps overlap as executed (overlap_kernel), scaled down so that together they are worth
+#: at most SHARED_DRAWS of its own draws. Its own draws then outweigh them as they
+#: accumulate, so the posterior mean still converges to the arm's own P_F.
+SHARED_DRAWS = 10.0
+#: Overlaps below this are dropped (the kernel is sparse).
+OVERLAP_CUTOFF = 1e-3
 #: Thompson rounds (thompson_counts): the threshold is this lower quantile of the leading
 #: arms' posteriors, the THOMPSON_LEADERS arms of highest posterior mean. An arm that lies
 #: above it with probability below THOMPSON_SPARSE (THOMPSON_SPARSE_CLOSED when its
@@ -53,34 +61,66 @@ class Arms:
     ``successes`` and ``pulls`` (A,), the sum of each arm's tie-break values over its pulls
     (``tie``; a grasp's Ferrari-Canny quality), how many draws each arm may take at most
     (``depth``: the pool's size) and which arms are still in play (``alive``: pruning
-    drops arms; every other policy keeps them all)."""
+    drops arms; every other policy keeps them all).
+
+    With ``neighbours`` (a sparse (A, A) matrix of overlaps in [0, 1], zero diagonal;
+    :func:`overlap_kernel`) and ``shared_draws`` > 0, arm a's posterior also counts its
+    neighbours' outcomes: S_a = sum_b W_ab successes_b and F_a = sum_b W_ab failures_b,
+    both scaled by min(1, shared_draws / (S_a + F_a)), so that they are worth at most
+    ``shared_draws`` of its own draws (``shared``: (2, A), the scaled S and F)."""
 
     successes: np.ndarray
     pulls: np.ndarray
     tie: np.ndarray
     depth: int
     alive: np.ndarray
+    neighbours: sparse.csr_matrix | None = None
+    shared_draws: float = 0.0
+    shared: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.shared is None:
+            self._share()
 
     @classmethod
-    def fresh(cls, count: int, depth: int) -> "Arms":
+    def fresh(cls, count: int, depth: int, neighbours=None, shared_draws: float = 0.0) -> "Arms":
         return cls(np.zeros(count, dtype=np.int64), np.zeros(count, dtype=np.int64), np.zeros(count), int(depth),
-                   np.ones(count, dtype=bool))
+                   np.ones(count, dtype=bool), neighbours, float(shared_draws))
 
     def __len__(self) -> int:
         return len(self.pulls)
 
     @property
+    def shares(self) -> bool:
+        """Whether the posteriors count the neighbours' outcomes."""
+        return self.neighbours is not None and self.shared_draws > 0
+
+    @property
     def alpha(self) -> np.ndarray:
-        return 1.0 + self.successes
+        return 1.0 + self.successes + self.shared[0]
 
     @property
     def beta(self) -> np.ndarray:
-        return 1.0 + self.pulls - self.successes
+        return 1.0 + self.pulls - self.successes + self.shared[1]
 
     @property
     def mean(self) -> np.ndarray:
-        """Posterior means (1 + successes) / (2 + pulls)."""
-        return self.alpha / (2.0 + self.pulls)
+        """Posterior means (1 + successes + S) / (2 + pulls + S + F): (1 + successes) /
+        (2 + pulls) without shared evidence."""
+        alpha = self.alpha
+        return alpha / (alpha + self.beta)
+
+    def _share(self) -> None:
+        if not self.shares:
+            self.shared = np.zeros((2, len(self.pulls)))
+            return
+        s = self.neighbours @ self.successes.astype(float)
+        f = self.neighbours @ (self.pulls - self.successes).astype(float)
+        total = s + f
+        scale = np.ones_like(total)
+        over = total > self.shared_draws
+        scale[over] = self.shared_draws / total[over]
+        self.shared = np.stack([scale * s, scale * f])
 
     @property
     def room(self) -> np.ndarray:
@@ -92,6 +132,7 @@ class Arms:
         np.add.at(self.successes, arms, np.asarray(success, dtype=np.int64))
         np.add.at(self.pulls, arms, 1)
         np.add.at(self.tie, arms, np.asarray(tie, dtype=float))
+        self._share()
 
     def best(self) -> int:
         """The arm with the highest posterior mean; ties go to more pulls, then to the
@@ -111,6 +152,8 @@ def allocate(pull, arms: Arms, policy: str, budget: int, batch: int, rng: np.ran
     after each round. Returns ``arms``, updated in place."""
     if policy not in POLICIES:
         raise ValueError(f"policy must be one of {', '.join(POLICIES)}, got {policy!r}")
+    if arms.shares and policy != "thompson":
+        raise ValueError(f"shared evidence is for Thompson sampling; policy {policy!r} judges each arm alone")
     used = int(arms.pulls.sum())
     while used < budget and arms.room.sum() > 0 and not (stop is not None and stop()):
         k = min(batch, max(FIRST_ROUND, int(ROUND_GROWTH * used)), budget - used)
@@ -267,6 +310,33 @@ def _above(alpha: np.ndarray, beta: np.ndarray, tail: np.ndarray, tau: float, rn
     if general.any():
         inverse[general] = 1.0 - special.betaincinv(beta[general], alpha[general], u[general])
     return np.where(beta == 1.0, power_b, np.where(alpha == 1.0, power_a, inverse))
+
+
+def overlap_kernel(grasps, sigma: float, cutoff: float = OVERLAP_CUTOFF) -> sparse.csr_matrix:
+    """How much each two of G grasps (jaw starts (G, 2, 2)) overlap as executed: W (G, G),
+    sparse, zero diagonal. Under approach noise each executed grasp is its four start
+    coordinates x plus N(0, sigma^2 I_4) (the pair's narrowing to the opening aside); the
+    Bhattacharyya coefficient of two such Gaussians is exp(-|x_i - x_j|^2 / (8 sigma^2)),
+    with the jaws' order ignored (the larger of the two orders' values). Values below
+    ``cutoff`` are dropped; without approach noise (sigma = 0) no two distinct grasps
+    overlap."""
+    x = np.asarray(grasps, dtype=float).reshape(-1, 4)
+    g = len(x)
+    if g < 2 or sigma <= 0:
+        return sparse.csr_matrix((g, g))
+    reach = sigma * math.sqrt(8.0 * math.log(1.0 / cutoff))
+    tree = spatial.cKDTree(x)
+    found = [tree.sparse_distance_matrix(other, reach, output_type="ndarray")
+             for other in (tree, spatial.cKDTree(x[:, [2, 3, 0, 1]]))]  # as given, jaws swapped
+    rows = np.concatenate([f["i"] for f in found]).astype(np.int64)
+    cols = np.concatenate([f["j"] for f in found]).astype(np.int64)
+    value = np.exp(-np.concatenate([f["v"] for f in found]) ** 2 / (8.0 * sigma**2))
+    keep = (rows != cols) & (value >= cutoff)
+    rows, cols, value = rows[keep], cols[keep], value[keep]
+    key = rows * g + cols  # both orders may reach the same pair: keep the larger value
+    order = np.lexsort((-value, key))
+    first = order[np.r_[True, key[order][1:] != key[order][:-1]]] if len(order) else order
+    return sparse.csr_matrix((value[first], (rows[first], cols[first])), shape=(g, g))
 
 
 def prune(arms: Arms, z: float = Z95) -> None:

@@ -9,7 +9,7 @@ import numpy as np
 from harness.grasp import Grasp
 from harness.quality import DrawPool, evaluate_pairs
 from planners import candidates as cand
-from planners.allocation import POLICIES, Arms, allocate
+from planners.allocation import POLICIES, SHARED_DRAWS, Arms, allocate, overlap_kernel
 from planners.base import Plan, Planner, Problem, Stopwatch, check_quality
 
 #: The discounts whose Gittins table is affordable (its calibration grows as
@@ -21,11 +21,13 @@ class GPBandit(Planner):
     name = "gp-bandit"
     description = "GP-P's candidates as bandit arms: draws spent by Thompson sampling, Gittins, Bayes-UCB or uniformly"
     BOUNDS = {"candidates": (1, 10_000), "samples": (1, 10_000), "budget_draws": (1, 100_000_000),
-              "batch": (1, 100_000), "discount": DISCOUNTS, "angular_noise_deg": (0.0, 90.0)}
+              "batch": (1, 100_000), "discount": DISCOUNTS, "angular_noise_deg": (0.0, 90.0),
+              "shared_draws": (0.0, 100_000.0)}
 
     def __init__(self, candidates: int = 100, samples: int = 1000, policy: str = "thompson",
                  budget_draws: int = 1000, batch: int = 2000, discount: float = 0.9,
-                 quality: str = "force_closure", angular_noise_deg: float = 10.0):
+                 quality: str = "force_closure", angular_noise_deg: float = 10.0,
+                 shared_draws: float | None = None):
         if min(candidates, samples, budget_draws, batch) < 1:
             raise ValueError("candidates, samples, budget_draws and batch must be at least 1")
         if policy not in POLICIES:
@@ -40,6 +42,12 @@ class GPBandit(Planner):
         self.discount = float(discount)
         self.quality = check_quality(quality)
         self.angular_noise_deg = float(angular_noise_deg)
+        if shared_draws is None:  # Thompson sampling shares evidence by default; no other policy can
+            shared_draws = SHARED_DRAWS if policy == "thompson" else 0.0
+        if shared_draws < 0 or (shared_draws > 0 and policy != "thompson"):
+            raise ValueError(f"shared_draws must be 0 or more, and 0 unless the policy is thompson "
+                             f"(policy {policy!r}, shared_draws {shared_draws})")
+        self.shared_draws = float(shared_draws)
 
     def plan(self, problem: Problem, rng: np.random.Generator, record: list | None = None) -> Plan:
         """As Planner.plan; ``record`` (a list) receives (seconds, draws used, best grasp
@@ -75,7 +83,8 @@ class GPBandit(Planner):
             if record is not None:
                 record.append((seconds, used, grasps[best].copy()))
 
-        arms = allocate(pull, Arms.fresh(len(grasps), self.samples), self.policy, self.budget_draws, self.batch,
+        neighbours = overlap_kernel(grasps, settings.sigma_g) if self.shared_draws > 0 else None
+        arms = allocate(pull, Arms.fresh(len(grasps), self.samples, neighbours, self.shared_draws), self.policy, self.budget_draws, self.batch,
                         policy_rng, self.discount, stop=clock.over_budget, after_round=after_round)
         self.grasps_, self.arms_ = grasps, arms
         used = int(arms.pulls.sum())

@@ -540,7 +540,7 @@ def _bandit_lines(res: dict) -> list[str]:
              f"until it stays within 1 % / 3 %: median and 90th percentile over runs (never: not within the "
              f"run's draws), the median of uniform's over the policy's per run, and the share of runs within "
              f"after 1000 draws",
-             f"{'policy':<9}{'median':>14}{'p90':>16}{'seconds':>15}{'uniform/pol':>13}{'at 1000':>11}"
+             f"{'policy':<15}{'median':>14}{'p90':>16}{'seconds':>15}{'uniform/pol':>13}{'at 1000':>11}"
              f"{'pull/draw':>10}{'judging':>9}{'plan s':>8}"]
     for policy, row in summary["policies"].items():
         one, three = row["1pct"], row["3pct"]
@@ -548,7 +548,7 @@ def _bandit_lines(res: dict) -> list[str]:
         def pair(key, fmt, row1=one, row3=three):
             return f"{num(row1[key], fmt)} / {num(row3[key], fmt)}"
 
-        lines.append(f"{policy:<9}{pair('median_draws', '.0f'):>14}{pair('p90_draws', '.0f'):>16}"
+        lines.append(f"{policy:<15}{pair('median_draws', '.0f'):>14}{pair('p90_draws', '.0f'):>16}"
                      f"{pair('median_seconds', '.3f'):>15}{pair('median_uniform_over_policy_draws', '.1f'):>13}"
                      f"{one['within_after']['1000']:>7.2f}/{three['within_after']['1000']:.2f}"
                      f"{num(row['pull_over_gp_p_draw'], '.2f'):>9}"

@@ -24,7 +24,6 @@ from harness.errors import InputError
 from harness.quality import default_streams, draw_evaluation, estimate_p_f
 from harness.scene import Scene, library_names, load_scene, parse_scene
 from harness.seeding import stream
-from planners.allocation import POLICIES
 from planners.base import Problem
 from planners.gp_bandit import GPBandit
 from planners.gp_p import GPP
@@ -37,6 +36,12 @@ SEEDS = 3
 #: et al.'s count.
 CANDIDATES = 100
 TOLERANCES = (0.01, 0.03)
+#: The study's allocations, label: (gp-bandit's policy, its shared_draws; None: the
+#: default). "thompson" is gp-bandit's default, whose posteriors share evidence between
+#: overlapping candidates; "thompson-alone" judges every arm on its own draws only, as
+#: Laskey et al.'s Thompson sampling did.
+ALLOCATIONS = {"thompson": ("thompson", None), "thompson-alone": ("thompson", 0.0), "gittins": ("gittins", None),
+               "ucb": ("ucb", None), "uniform": ("uniform", None), "pruning": ("pruning", None)}
 #: Draws after which the study reports the share of runs within each tolerance.
 ANYTIME_BUDGETS = (250, 500, 1000, 2000, 5000)
 EVALUATION_DRAWS = 1000
@@ -83,11 +88,11 @@ def scene_of(name: str) -> Scene:
 
 
 def run(name: str, seed: int, candidates: int = CANDIDATES, samples: int = 1000, budget: int = ADAPTIVE_BUDGET,
-        batch: int | None = None, policies=POLICIES, defaults: bool = True) -> dict:
-    """One run: every policy's curve (draws, seconds, P_F of its best grasp so far on the
-    evaluation draws, kept at the first round, the rounds where that P_F changes and the
-    last), gp-p's plan time and choice, the target, and (``defaults``) the default
-    planners' plan times and P_F."""
+        batch: int | None = None, policies=tuple(ALLOCATIONS), defaults: bool = True) -> dict:
+    """One run: every allocation's curve (``policies``: labels of ALLOCATIONS; draws,
+    seconds, P_F of its best grasp so far on the evaluation draws, kept at the first round,
+    the rounds where that P_F changes and the last), gp-p's plan time and choice, the
+    target, and (``defaults``) the default planners' plan times and P_F."""
     scene = scene_of(name)
     belief = build_belief(scene, stream(seed, scene.name, 0, "sensor")).prepare()
     problem = Problem.for_belief(belief)
@@ -113,8 +118,9 @@ def run(name: str, seed: int, candidates: int = CANDIDATES, samples: int = 1000,
         out["defaults"] = _defaults(problem, scene.name, seed, p_f)
     extra = {} if batch is None else {"batch": batch}
     for policy in policies:
-        full = policy in ("uniform", "pruning")
-        planner = GPBandit(candidates=candidates, samples=samples, policy=policy,
+        name, shared = ALLOCATIONS[policy]
+        full = name in ("uniform", "pruning")
+        planner = GPBandit(candidates=candidates, samples=samples, policy=name, shared_draws=shared,
                            budget_draws=candidates * samples if full else budget, **extra)
         record: list = []
         t0 = time.perf_counter()
@@ -163,7 +169,7 @@ def reached(curve: list, target: float, tolerance: float):
     return curve[k][0], curve[k][1]
 
 
-def summarise(runs: list[dict], policies=POLICIES) -> dict:
+def summarise(runs: list[dict], policies=tuple(ALLOCATIONS)) -> dict:
     """Per policy and tolerance: the median and 90th percentile of the draws, and the
     median seconds, to reach it (a run that never does counts as infinitely many; an
     infinite statistic is None), how many runs reach it, the median over runs of
