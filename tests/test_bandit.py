@@ -507,6 +507,12 @@ def test_a_tiny_study_measures_every_policy_and_draws_its_figure(tmp_path):
     summary = bandit_study.summarise(runs)
     assert summary["uniform_is_gp_p"] == 1 and summary["policies"]["uniform"]["3pct"]["reached"] == 1
     assert summary["policies"]["uniform"]["3pct"]["median_uniform_over_policy_draws"] == 1.0
+    # One library run: its group repeats the whole study's medians; no shared outline ran.
+    assert list(summary["by_scenes"]) == ["library"] and summary["by_scenes"]["library"]["runs"] == 1
+    for policy, row in summary["by_scenes"]["library"]["policies"].items():
+        for key in ("1pct", "3pct"):
+            assert row[key]["median_draws"] == summary["policies"][policy][key]["median_draws"]
+            assert row[key]["uniform_median_draws"] == summary["policies"]["uniform"][key]["median_draws"]
     fig = plots.bandit_figure({"runs": runs, "scenes": ["disk"], "seeds": 1})
     fig.savefig(tmp_path / "bandit.png")
     assert (tmp_path / "bandit.png").read_bytes()[:4] == b"\x89PNG"

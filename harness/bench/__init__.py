@@ -553,6 +553,18 @@ def _bandit_lines(res: dict) -> list[str]:
                      f"{one['within_after']['1000']:>7.2f}/{three['within_after']['1000']:.2f}"
                      f"{num(row['pull_over_gp_p_draw'], '.2f'):>9}"
                      f"{num(row.get('judging_over_gp_p'), '.2f'):>9}{num(row['median_plan_s'], '.3f'):>8}")
+    for group, part in summary.get("by_scenes", {}).items():
+        lines.append(f"{group} ({part['runs']} runs), draws to 3 % / 1 %, median, against uniform's "
+                     f"(uniform's median over the policy's; the median per-run ratio):")
+        for policy, row in part["policies"].items():
+            cells = []
+            for key in ("3pct", "1pct"):
+                c = row[key]
+                mine, theirs = c["median_draws"], c["uniform_median_draws"]
+                over = "-" if mine is None or theirs is None else f"{theirs / mine:.2g}x"
+                cells.append(f"{num(mine, '.0f')} vs {num(theirs, '.0f')} ({over}; "
+                             f"{num(c['median_uniform_over_policy_draws'], '.1f')}x)")
+            lines.append(f"  {policy:<15}" + " / ".join(cells))
     lines.append(f"uniform made gp-p's choice in {summary['uniform_is_gp_p']} of {summary['runs']} runs; "
                  f"pull/draw: seconds per pull over gp-p's per draw, shape samples included; judging: "
                  f"without them")

@@ -176,21 +176,16 @@ def summarise(runs: list[dict], policies=tuple(ALLOCATIONS)) -> dict:
     uniform's draws (seconds) over the policy's, and the share of runs within it after
     each of ANYTIME_BUDGETS draws (a budgeted planner's view). Per policy also its seconds
     per pull over gp-p's per draw, with the shape samples (``pull_over_gp_p_draw``) and
-    without them (``judging_over_gp_p``, see :func:`_judging`), and its median plan time. Plus the
-    default planners' plan times and P_F on the library scenes (``make eval``'s)."""
+    without them (``judging_over_gp_p``, see :func:`_judging`), and its median plan time.
+    ``by_scenes``: the draws to each tolerance on the library scenes and on the shared
+    outlines apart (see :func:`_by_scenes`). Plus the default planners' plan times and P_F
+    on the library scenes (``make eval``'s)."""
     runs = [r for r in runs if "skipped" not in r]
     table = {}
     for policy in (p for p in policies if all(p in r["curves"] for r in runs)):
         row = {}
         for tol in TOLERANCES:
-            draws, seconds, ratio_d, ratio_s = [], [], [], []
-            for r in runs:
-                d, s = reached(r["curves"][policy], r["target"], tol)
-                du, su = reached(r["curves"]["uniform"], r["target"], tol)
-                draws.append(math.inf if d is None else d)
-                seconds.append(math.inf if s is None else s)
-                ratio_d.append(_ratio(du, d))
-                ratio_s.append(_ratio(su, s))
+            draws, seconds, ratio_d, ratio_s = _reaching(runs, policy, tol)
             within = {str(b): float(np.mean([at_draws(r["curves"][policy], b) >= (1 - tol) * r["target"]
                                              for r in runs])) for b in ANYTIME_BUDGETS}
             row[f"{round(tol * 100)}pct"] = {
@@ -211,9 +206,48 @@ def summarise(runs: list[dict], policies=tuple(ALLOCATIONS)) -> dict:
         defaults[name] = {"median_plan_s": _quantile([d["plan_s"] for d in rows], 0.5),
                           "mean_plan_s": float(np.mean([d["plan_s"] for d in rows])) if rows else None,
                           "mean_p_f": float(np.mean([d["p_f"] for d in rows])) if rows else None, "runs": len(rows)}
-    return {"policies": table, "median_gp_p_s": _quantile([r["gp_p_s"] for r in runs], 0.5),
+    return {"policies": table, "by_scenes": _by_scenes(runs, list(table)),
+            "median_gp_p_s": _quantile([r["gp_p_s"] for r in runs], 0.5),
             "uniform_is_gp_p": sum(bool(r.get("uniform_is_gp_p")) for r in runs), "runs": len(runs),
             "library_defaults": defaults}
+
+
+def _reaching(runs: list[dict], policy: str, tolerance: float):
+    """Per run: the draws and seconds the policy needs to reach ``tolerance`` (infinite
+    when it does not), and uniform's over the policy's (draws, seconds)."""
+    draws, seconds, ratio_d, ratio_s = [], [], [], []
+    for r in runs:
+        d, s = reached(r["curves"][policy], r["target"], tolerance)
+        du, su = reached(r["curves"]["uniform"], r["target"], tolerance)
+        draws.append(math.inf if d is None else d)
+        seconds.append(math.inf if s is None else s)
+        ratio_d.append(_ratio(du, d))
+        ratio_s.append(_ratio(su, s))
+    return draws, seconds, ratio_d, ratio_s
+
+
+def _by_scenes(runs: list[dict], policies: list[str]) -> dict:
+    """For the library scenes and the shared outlines apart (a group without runs is
+    left out): per policy and tolerance, the median draws to reach it, uniform's median,
+    and the median over runs of uniform's draws over the policy's."""
+    library = set(library_names())
+    groups = {"library": [r for r in runs if r["scene"] in library],
+              "shared outlines": [r for r in runs if r["scene"] not in library]}
+    out = {}
+    for group, members in groups.items():
+        if not members:
+            continue
+        rows = {}
+        for policy in policies:
+            rows[policy] = {}
+            for tol in TOLERANCES:
+                draws, _, ratio_d, _ = _reaching(members, policy, tol)
+                uniform = _reaching(members, "uniform", tol)[0]
+                rows[policy][f"{round(tol * 100)}pct"] = {
+                    "median_draws": _quantile(draws, 0.5), "uniform_median_draws": _quantile(uniform, 0.5),
+                    "median_uniform_over_policy_draws": _quantile(ratio_d, 0.5)}
+        out[group] = {"runs": len(members), "policies": rows}
+    return out
 
 
 def _judging(run: dict, policy: str) -> float:
