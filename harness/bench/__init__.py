@@ -561,7 +561,8 @@ def _bandit_lines(res: dict) -> list[str]:
             for key in ("3pct", "1pct"):
                 c = row[key]
                 mine, theirs = c["median_draws"], c["uniform_median_draws"]
-                over = "-" if mine is None or theirs is None else f"{theirs / mine:.2g}x"
+                ratio = None if mine is None or theirs is None else theirs / mine
+                over = "-" if ratio is None else f"{ratio:.1f}x" if ratio >= 0.1 else f"{ratio:.2f}x"
                 cells.append(f"{num(mine, '.0f')} vs {num(theirs, '.0f')} ({over}; "
                              f"{num(c['median_uniform_over_policy_draws'], '.1f')}x)")
             lines.append(f"  {policy:<15}" + " / ".join(cells))
