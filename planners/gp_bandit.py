@@ -1,6 +1,8 @@
 """GP-bandit: GP-P's candidates as the arms of a Beta-Bernoulli bandit (Laskey et al.,
 CASE 2015): one pull judges one candidate on one paired draw of the pool, and the policy
-spends the draws where they decide the choice."""
+spends the draws where they decide the choice. Thompson sampling's posteriors also count
+the outcomes of overlapping candidates, up to a cap (shared evidence, after Dex-Net 1.0;
+planners.allocation.Arms)."""
 
 from __future__ import annotations
 
@@ -84,8 +86,9 @@ class GPBandit(Planner):
                 record.append((seconds, used, grasps[best].copy()))
 
         neighbours = overlap_kernel(grasps, settings.sigma_g) if self.shared_draws > 0 else None
-        arms = allocate(pull, Arms.fresh(len(grasps), self.samples, neighbours, self.shared_draws), self.policy, self.budget_draws, self.batch,
-                        policy_rng, self.discount, stop=clock.over_budget, after_round=after_round)
+        arms = allocate(pull, Arms.fresh(len(grasps), self.samples, neighbours, self.shared_draws), self.policy,
+                        self.budget_draws, self.batch, policy_rng, self.discount, stop=clock.over_budget,
+                        after_round=after_round)
         self.grasps_, self.arms_ = grasps, arms
         used = int(arms.pulls.sum())
         clock.lap("allocation")
