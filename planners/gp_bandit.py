@@ -21,7 +21,8 @@ DISCOUNTS = (0.5, 0.95)
 
 class GPBandit(Planner):
     name = "gp-bandit"
-    description = "GP-P's candidates as bandit arms: draws spent by Thompson sampling, Gittins, Bayes-UCB or uniformly"
+    description = ("GP-P's candidates as bandit arms: draws spent by Thompson sampling (sharing evidence between "
+                   "overlapping candidates), Gittins, Bayes-UCB or uniformly")
     BOUNDS = {"candidates": (1, 10_000), "samples": (1, 10_000), "budget_draws": (1, 100_000_000),
               "batch": (1, 100_000), "discount": DISCOUNTS, "angular_noise_deg": (0.0, 90.0),
               "shared_draws": (0.0, 100_000.0)}

@@ -137,10 +137,14 @@ def parameter_value(cls, key: str, raw):
     not true), a float parameter finite numbers (an integer becomes a float), a bool
     parameter true or false, a str parameter a string. A string given to a parameter of
     another type is read as its text (``--param KEY=VALUE`` gives strings). A parameter
-    whose default is of another type (None, a tuple) takes any value unchecked. Numbers
-    must then lie in ``cls.BOUNDS[key]`` (inclusive), when given.
+    whose default is None and which has a range in BOUNDS is an optional float (None: the
+    planner chooses); any other default type (None without a range, a tuple) takes any
+    value unchecked. Numbers must then lie in ``cls.BOUNDS[key]`` (inclusive), when given.
     """
-    kind = type(cls.parameters()[key])
+    default = cls.parameters()[key]
+    if default is None and raw is None:
+        return None
+    kind = float if default is None and key in cls.BOUNDS else type(default)
     if kind is bool:
         return _boolean(raw)
     if kind is str:

@@ -162,6 +162,13 @@ def test_only_thompson_sampling_shares_evidence():
     with pytest.raises(InputError) as err:
         make_planner("gp-bandit", {"policy": "uniform", "shared_draws": 3})
     assert "shared_draws" in str(err.value)
+    # --param gives text: the optional number is read as one and checked against its range.
+    assert make_planner("gp-bandit", {"shared_draws": "2.5"}).shared_draws == 2.5
+    assert make_planner("gp-bandit", {"policy": "ucb", "shared_draws": "0"}).shared_draws == 0.0
+    for bad in ("abc", "-1", "inf"):
+        with pytest.raises(InputError) as err:
+            make_planner("gp-bandit", {"shared_draws": bad})
+        assert err.value.field == "shared_draws", bad
     from scipy import sparse
 
     with pytest.raises(ValueError, match="Thompson"):
