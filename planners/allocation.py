@@ -67,7 +67,8 @@ class Arms:
     :func:`overlap_kernel`) and ``shared_draws`` > 0, arm a's posterior also counts its
     neighbours' outcomes: S_a = sum_b W_ab successes_b and F_a = sum_b W_ab failures_b,
     both scaled by min(1, shared_draws / (S_a + F_a)), so that they are worth at most
-    ``shared_draws`` of its own draws (``shared``: (2, A), the scaled S and F)."""
+    ``shared_draws`` of its own draws (``shared``: (2, A), the scaled S and F, recomputed
+    by :meth:`record`; set the counts through it)."""
 
     successes: np.ndarray
     pulls: np.ndarray
