@@ -327,17 +327,13 @@ def overlap_kernel(grasps, sigma: float, cutoff: float = OVERLAP_CUTOFF) -> spar
         return sparse.csr_matrix((g, g))
     reach = sigma * math.sqrt(8.0 * math.log(1.0 / cutoff))
     tree = spatial.cKDTree(x)
-    found = [tree.sparse_distance_matrix(other, reach, output_type="ndarray")
-             for other in (tree, spatial.cKDTree(x[:, [2, 3, 0, 1]]))]  # as given, jaws swapped
-    rows = np.concatenate([f["i"] for f in found]).astype(np.int64)
-    cols = np.concatenate([f["j"] for f in found]).astype(np.int64)
-    value = np.exp(-np.concatenate([f["v"] for f in found]) ** 2 / (8.0 * sigma**2))
-    keep = (rows != cols) & (value >= cutoff)
-    rows, cols, value = rows[keep], cols[keep], value[keep]
-    key = rows * g + cols  # both orders may reach the same pair: keep the larger value
-    order = np.lexsort((-value, key))
-    first = order[np.r_[True, key[order][1:] != key[order][:-1]]] if len(order) else order
-    return sparse.csr_matrix((value[first], (rows[first], cols[first])), shape=(g, g))
+    orders = []
+    for other in (tree, spatial.cKDTree(x[:, [2, 3, 0, 1]])):  # the jaws as given, then swapped
+        found = tree.sparse_distance_matrix(other, reach, output_type="ndarray")
+        value = np.exp(-found["v"] ** 2 / (8.0 * sigma**2))
+        keep = (found["i"] != found["j"]) & (value >= cutoff)
+        orders.append(sparse.csr_matrix((value[keep], (found["i"][keep], found["j"][keep])), shape=(g, g)))
+    return orders[0].maximum(orders[1]).tocsr()
 
 
 def prune(arms: Arms, z: float = Z95) -> None:
