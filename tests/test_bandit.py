@@ -16,6 +16,7 @@ import pandas as pd
 import pytest
 from scipy import integrate, special, stats
 
+from harness.belief import build_belief
 from harness.errors import InputError
 from harness.quality import draw_evaluation, estimate_p_f
 from harness.seeding import stream
@@ -514,6 +515,16 @@ def test_a_tiny_study_measures_every_policy_and_draws_its_figure(tmp_path):
     summary = bandit_study.summarise(runs)
     assert summary["uniform_is_gp_p"] == 1 and summary["policies"]["uniform"]["3pct"]["reached"] == 1
     assert summary["policies"]["uniform"]["3pct"]["median_uniform_over_policy_draws"] == 1.0
+    # The share of candidates within each tolerance of the best, by gp-p's estimates: as
+    # uniform allocation's full pulls count them (a second path: evaluate_pairs).
+    planner = GPBandit(candidates=12, samples=60, policy="uniform", budget_draws=12 * 60)
+    belief = build_belief(bandit_study.scene_of("disk"), stream(0, "disk", 0, "sensor")).prepare()
+    planner.plan(Problem.for_belief(belief), stream(0, "disk", 0, "planner", "gp-bandit-study"))
+    assert (planner.arms_.pulls == 60).all()
+    pool_p_f = planner.arms_.successes / 60
+    for tol, key in ((0.01, "1pct"), (0.03, "3pct")):
+        assert runs[0]["share_within"][key] == np.mean(pool_p_f >= (1 - tol) * pool_p_f.max())
+    assert summary["ceiling"]["3pct"]["share_within"] == runs[0]["share_within"]["3pct"]
     # One library run: its group repeats the whole study's medians; no shared outline ran.
     assert list(summary["by_scenes"]) == ["library"] and summary["by_scenes"]["library"]["runs"] == 1
     for policy, row in summary["by_scenes"]["library"]["policies"].items():
@@ -523,6 +534,23 @@ def test_a_tiny_study_measures_every_policy_and_draws_its_figure(tmp_path):
     fig = plots.bandit_figure({"runs": runs, "scenes": ["disk"], "seeds": 1})
     fig.savefig(tmp_path / "bandit.png")
     assert (tmp_path / "bandit.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_the_ceiling_is_uniforms_draws_over_the_first_round():
+    from harness.bench.bandit_study import _ceiling
+
+    def curve(reach, last=1000):  # within 3 % from ``reach`` draws on, within 1 % never
+        return [(20, 0.02, 0.5)] + [(d, d / 1000, 0.98) for d in (reach, last) if d >= 20]
+
+    runs = [{"curves": {"uniform": curve(d)}, "target": 1.0, "share_within": {"1pct": s1, "3pct": s3}}
+            for d, s1, s3 in ((40, 0.1, 0.2), (100, 0.0, 0.5), (400, 0.3, 0.4))]
+    ceiling = _ceiling(runs)
+    # 3 %: uniform's median 100 draws over the first round's 20; per run 2, 5 and 20.
+    assert ceiling["3pct"] == {"of_medians": 5.0, "median_per_run": 5.0, "share_within": 0.4}
+    # 1 %: uniform never gets there, so nothing bounds the others' ratio.
+    assert ceiling["1pct"] == {"of_medians": None, "median_per_run": None, "share_within": 0.1}
+    runs[0]["curves"]["uniform"] = curve(20)  # within from the first round: a ceiling of 1
+    assert _ceiling(runs[:1])["3pct"]["of_medians"] == 1.0
 
 
 def test_the_study_refuses_unknown_scenes_before_any_work(capsys):

@@ -553,9 +553,20 @@ def _bandit_lines(res: dict) -> list[str]:
                      f"{one['within_after']['1000']:>7.2f}/{three['within_after']['1000']:.2f}"
                      f"{num(row['pull_over_gp_p_draw'], '.2f'):>9}"
                      f"{num(row.get('judging_over_gp_p'), '.2f'):>9}{num(row['median_plan_s'], '.3f'):>8}")
+    def ceiling(c):
+        if not c:
+            return "no uniform runs"
+        cells = [f"{num(c[k]['of_medians'], '.1f')}x ({num(c[k]['median_per_run'], '.1f')}x per run; "
+                 f"{'n/a' if c[k]['share_within'] is None else format(c[k]['share_within'], '.2f')} "
+                 f"of the candidates within)" for k in ("3pct", "1pct")]
+        return " / ".join(cells)
+
+    lines.append(f"ceiling at 3 % / 1 %, the most any allocation could beat uniform by (uniform's median draws over "
+                 f"the first round's): {ceiling(summary.get('ceiling'))}")
     for group, part in summary.get("by_scenes", {}).items():
         lines.append(f"{group} ({part['runs']} runs), draws to 3 % / 1 %, median, against uniform's "
-                     f"(uniform's median over the policy's; the median per-run ratio):")
+                     f"(uniform's median over the policy's; the median per-run ratio); ceiling "
+                     f"{ceiling(part.get('ceiling'))}:")
         for policy, row in part["policies"].items():
             cells = []
             for key in ("3pct", "1pct"):

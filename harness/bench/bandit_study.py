@@ -107,13 +107,20 @@ def run(name: str, seed: int, candidates: int = CANDIDATES, samples: int = 1000,
 
     planner_stream = ("planner", "gp-bandit-study")
     t0 = time.perf_counter()
-    gpp = GPP(candidates=candidates, samples=samples).plan(problem, stream(seed, scene.name, 0, *planner_stream))
+    chunks: list = []
+    gpp = GPP(candidates=candidates, samples=samples).plan(problem, stream(seed, scene.name, 0, *planner_stream),
+                                                           record=chunks)
     gpp_s = time.perf_counter() - t0
     out = {"scene": scene.name, "seed": seed, "gp_p_s": gpp_s, "gp_p_draws": gpp.evaluations * samples,
-           "target": p_f(gpp.grasp.array), "curves": {}, "plan_s": {}, "seconds": {}}
+           "curves": {}, "plan_s": {}, "seconds": {}}
     if gpp.status != "ok":
         out["skipped"] = f"gp-p: {gpp.status}"
         return out
+    out["target"] = p_f(gpp.grasp.array)
+    # How many candidates are nearly as good as gp-p's choice, by gp-p's own estimates.
+    pool_p_f = np.concatenate([values for _, _, values in chunks])
+    out["share_within"] = {f"{round(tol * 100)}pct": float(np.mean(pool_p_f >= (1 - tol) * pool_p_f.max()))
+                           for tol in TOLERANCES}
     if defaults:
         out["defaults"] = _defaults(problem, scene.name, seed, p_f)
     extra = {} if batch is None else {"batch": batch}
@@ -177,8 +184,10 @@ def summarise(runs: list[dict], policies=tuple(ALLOCATIONS)) -> dict:
     each of ANYTIME_BUDGETS draws (a budgeted planner's view). Per policy also its seconds
     per pull over gp-p's per draw, with the shape samples (``pull_over_gp_p_draw``) and
     without them (``judging_over_gp_p``, see :func:`_judging`), and its median plan time.
-    ``by_scenes``: the draws to each tolerance on the library scenes and on the shared
-    outlines apart (see :func:`_by_scenes`). Plus the default planners' plan times and P_F
+    ``ceiling``: the largest ratio to uniform that any allocation could show, and how many
+    candidates are within each tolerance (see :func:`_ceiling`). ``by_scenes``: the draws
+    to each tolerance on the library scenes and on the shared outlines apart, with their
+    ceilings (see :func:`_by_scenes`). Plus the default planners' plan times and P_F
     on the library scenes (``make eval``'s)."""
     runs = [r for r in runs if "skipped" not in r]
     table = {}
@@ -206,7 +215,7 @@ def summarise(runs: list[dict], policies=tuple(ALLOCATIONS)) -> dict:
         defaults[name] = {"median_plan_s": _quantile([d["plan_s"] for d in rows], 0.5),
                           "mean_plan_s": float(np.mean([d["plan_s"] for d in rows])) if rows else None,
                           "mean_p_f": float(np.mean([d["p_f"] for d in rows])) if rows else None, "runs": len(rows)}
-    return {"policies": table, "by_scenes": _by_scenes(runs, list(table)),
+    return {"policies": table, "ceiling": _ceiling(runs), "by_scenes": _by_scenes(runs, list(table)),
             "median_gp_p_s": _quantile([r["gp_p_s"] for r in runs], 0.5),
             "uniform_is_gp_p": sum(bool(r.get("uniform_is_gp_p")) for r in runs), "runs": len(runs),
             "library_defaults": defaults}
@@ -246,7 +255,30 @@ def _by_scenes(runs: list[dict], policies: list[str]) -> dict:
                 rows[policy][f"{round(tol * 100)}pct"] = {
                     "median_draws": _quantile(draws, 0.5), "uniform_median_draws": _quantile(uniform, 0.5),
                     "median_uniform_over_policy_draws": _quantile(ratio_d, 0.5)}
-        out[group] = {"runs": len(members), "policies": rows}
+        out[group] = {"runs": len(members), "policies": rows, "ceiling": _ceiling(members)}
+    return out
+
+
+def _ceiling(runs: list[dict]) -> dict:
+    """What no allocation could beat, per tolerance. The study's policies share one round
+    schedule, and a curve starts after its first round (planners.allocation.FIRST_ROUND
+    pulls: uniform's first point), so no policy reaches a tolerance in fewer draws, and
+    uniform's draws over the first round's bound both
+    uniform's median over a policy's (``of_medians``) and the median per-run ratio
+    (``median_per_run``). Also the median over runs of the share of candidates whose P_F
+    on the planners' pool is within the tolerance of the best one's (``share_within``;
+    how many candidates are nearly as good as gp-p's choice: the higher, the less any
+    allocation can gain). None where uniform never ran or never reached it."""
+    runs = [r for r in runs if "uniform" in r["curves"]]
+    out = {}
+    for tol in TOLERANCES:
+        key = f"{round(tol * 100)}pct"
+        uniform = _reaching(runs, "uniform", tol)[0]
+        first = [r["curves"]["uniform"][0][0] for r in runs]
+        median = _quantile(uniform, 0.5)
+        out[key] = {"of_medians": None if median is None else median / _quantile(first, 0.5),
+                    "median_per_run": _quantile([u / f for u, f in zip(uniform, first)], 0.5),
+                    "share_within": _quantile([r["share_within"][key] for r in runs if "share_within" in r], 0.5)}
     return out
 
 
