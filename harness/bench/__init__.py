@@ -553,10 +553,15 @@ def _bandit_lines(res: dict) -> list[str]:
                      f"{one['within_after']['1000']:>7.2f}/{three['within_after']['1000']:.2f}"
                      f"{num(row['pull_over_gp_p_draw'], '.2f'):>9}"
                      f"{num(row.get('judging_over_gp_p'), '.2f'):>9}{num(row['median_plan_s'], '.3f'):>8}")
+
     def ceiling(c):
         if not c:
-            return "no uniform runs"
-        cells = [f"{num(c[k]['of_medians'], '.1f')}x ({num(c[k]['median_per_run'], '.1f')}x per run; "
+            return "not measured"
+
+        def bound(v):  # None: uniform never within, so nothing bounds the ratio
+            return "unbounded" if v is None else f"{v:.1f}x"
+
+        cells = [f"{bound(c[k]['of_medians'])} ({bound(c[k]['median_per_run'])} per run; "
                  f"{'n/a' if c[k]['share_within'] is None else format(c[k]['share_within'], '.2f')} "
                  f"of the candidates within)" for k in ("3pct", "1pct")]
         return " / ".join(cells)

@@ -268,8 +268,11 @@ def _ceiling(runs: list[dict]) -> dict:
     (``median_per_run``). Also the median over runs of the share of candidates whose P_F
     on the planners' pool is within the tolerance of the best one's (``share_within``;
     how many candidates are nearly as good as gp-p's choice: the higher, the less any
-    allocation can gain). None where uniform never ran or never reached it."""
+    allocation can gain). A bound is None where uniform never reached the tolerance; an
+    empty dict when uniform did not run."""
     runs = [r for r in runs if "uniform" in r["curves"]]
+    if not runs:
+        return {}
     out = {}
     for tol in TOLERANCES:
         key = f"{round(tol * 100)}pct"
