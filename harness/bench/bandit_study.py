@@ -262,22 +262,21 @@ def _by_scenes(runs: list[dict], policies: list[str]) -> dict:
 def _ceiling(runs: list[dict]) -> dict:
     """What no allocation could beat, per tolerance. The study's policies share one round
     schedule, and a curve starts after its first round (planners.allocation.FIRST_ROUND
-    pulls: uniform's first point), so no policy reaches a tolerance in fewer draws, and
-    uniform's draws over the first round's bound both
-    uniform's median over a policy's (``of_medians``) and the median per-run ratio
-    (``median_per_run``). Also the median over runs of the share of candidates whose P_F
-    on the planners' pool is within the tolerance of the best one's (``share_within``;
-    how many candidates are nearly as good as gp-p's choice: the higher, the less any
-    allocation can gain). A bound is None where uniform never reached the tolerance; an
-    empty dict when uniform did not run."""
+    pulls: uniform's first point), so no policy reaches a tolerance in fewer draws.
+    Uniform's draws over the first round's then bound uniform's median over a policy's
+    (``of_medians``) and the median per-run ratio (``median_per_run``). Also the median
+    over runs of the share of candidates whose P_F on the planners' pool is within the
+    tolerance of the best one's (``share_within``: how many candidates are nearly as good
+    as gp-p's choice; the more, the less any allocation can gain). A bound is None where
+    uniform never reached the tolerance; the dict is empty when uniform did not run."""
     runs = [r for r in runs if "uniform" in r["curves"]]
     if not runs:
         return {}
+    first = [r["curves"]["uniform"][0][0] for r in runs]
     out = {}
     for tol in TOLERANCES:
         key = f"{round(tol * 100)}pct"
         uniform = _reaching(runs, "uniform", tol)[0]
-        first = [r["curves"]["uniform"][0][0] for r in runs]
         median = _quantile(uniform, 0.5)
         out[key] = {"of_medians": None if median is None else median / _quantile(first, 0.5),
                     "median_per_run": _quantile([u / f for u, f in zip(uniform, first)], 0.5),
