@@ -246,14 +246,14 @@ def _by_scenes(runs: list[dict], policies: list[str]) -> dict:
     for group, members in groups.items():
         if not members:
             continue
+        uniform = {tol: _quantile(_reaching(members, "uniform", tol)[0], 0.5) for tol in TOLERANCES}
         rows = {}
         for policy in policies:
             rows[policy] = {}
             for tol in TOLERANCES:
                 draws, _, ratio_d, _ = _reaching(members, policy, tol)
-                uniform = _reaching(members, "uniform", tol)[0]
                 rows[policy][f"{round(tol * 100)}pct"] = {
-                    "median_draws": _quantile(draws, 0.5), "uniform_median_draws": _quantile(uniform, 0.5),
+                    "median_draws": _quantile(draws, 0.5), "uniform_median_draws": uniform[tol],
                     "median_uniform_over_policy_draws": _quantile(ratio_d, 0.5)}
         out[group] = {"runs": len(members), "policies": rows, "ceiling": _ceiling(members)}
     return out
