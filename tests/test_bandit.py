@@ -536,6 +536,41 @@ def test_a_tiny_study_measures_every_policy_and_draws_its_figure(tmp_path):
     assert (tmp_path / "bandit.png").read_bytes()[:4] == b"\x89PNG"
 
 
+def test_a_sensitivity_study_adds_thompson_sampling_with_each_shared_draws_value():
+    from harness import bench
+    from harness.bench import bandit_study
+
+    options = {"candidates": 12, "samples": 60, "budget": 300, "defaults": False}
+    labels = ["thompson", "thompson-alone", "thompson-shared-10", "thompson-shared-0", "uniform"]
+    runs = bandit_study.scene_runs("can_opener", 1, first_seed=5, shared_draws=(10, 0.0), policies=labels, **options)
+    assert [r["seed"] for r in runs] == [5] and list(runs[0]["curves"]) == labels
+
+    def path(curve):  # (draws, P_F) after each kept round; the seconds differ between plans
+        return [(d, p) for d, _, p in curve]
+
+    # A second path to the same allocations: 10 is gp-bandit's default, 0 judges every arm
+    # alone, so the added labels repeat "thompson" and "thompson-alone" exactly.
+    curves = runs[0]["curves"]
+    assert path(curves["thompson-shared-10"]) == path(curves["thompson"])
+    assert path(curves["thompson-shared-0"]) == path(curves["thompson-alone"])
+    assert path(curves["thompson"]) != path(curves["thompson-alone"])  # the two values differ here
+    # The first seed is the run's seed: seed 5 on its own gives the same run.
+    alone = bandit_study.run("can_opener", 5, policies=["uniform"], **options)
+    assert alone["target"] == runs[0]["target"] and path(alone["curves"]["uniform"]) == path(curves["uniform"])
+    assert bandit_study.run("can_opener", 0, policies=["uniform"], **options)["target"] != runs[0]["target"]
+    summary = bandit_study.summarise(runs)
+    assert list(summary["policies"]) == ["thompson", "thompson-alone", "uniform", "thompson-shared-10",
+                                         "thompson-shared-0"]
+    draws_only = ("median_draws", "p90_draws", "reached", "median_uniform_over_policy_draws", "within_after")
+    for tol in ("1pct", "3pct"):
+        for key in draws_only:
+            assert summary["policies"]["thompson-shared-10"][tol][key] == summary["policies"]["thompson"][tol][key]
+    text = bench.format_results({"seeds": 1, "first_seed": 5, "scenes": ["can_opener"], "candidates": 12,
+                                 "summary": summary})
+    assert "1 scene x seed 5, 12 candidates" in text
+    assert any(line.startswith("thompson-shared-0 ") for line in text.splitlines())
+
+
 def test_the_ceiling_is_uniforms_draws_over_the_first_round():
     from harness.bench.bandit_study import _ceiling
 
@@ -557,10 +592,14 @@ def test_the_study_refuses_unknown_scenes_before_any_work(capsys):
     from harness.cli import main
 
     for argv in (["bench", "bandit", "--scenes", "disk,no_such_scene"], ["bench", "bandit", "--seeds", "-1"],
-                 ["bench", "bandit", "--scenes", "shared_no_such_outline"], ["bench", "bandit", "--candidates", "0"]):
+                 ["bench", "bandit", "--scenes", "shared_no_such_outline"], ["bench", "bandit", "--candidates", "0"],
+                 ["bench", "bandit", "--shared-draws", "10,-1"], ["bench", "bandit", "--shared-draws", "ten"],
+                 ["bench", "bandit", "--shared-draws", "nan"], ["bench", "bandit", "--first-seed", "-3"]):
         assert main(argv) == 2, argv
         err = capsys.readouterr().err
         assert len(err.strip().splitlines()) == 1 and err.startswith("gpis-harness: error: "), (argv, err)
-    assert main(["bench", "bandit", "--seeds", "0", "--scenes", "disk", "--candidates", "1000", "--json"]) == 0
+    assert main(["bench", "bandit", "--seeds", "0", "--scenes", "disk", "--candidates", "1000", "--first-seed", "100",
+                 "--shared-draws", "3,30", "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["summary"] is None and out["candidates"] == 1000
+    assert out["first_seed"] == 100 and out["shared_draws"] == [3.0, 30.0]

@@ -187,12 +187,12 @@ def _planner_row(scene_name: str, size: int) -> dict:
 
 
 def planning(sizes=PLANNING_SIZES, scene: str = SAMPLING_SCENE, seeds: int | None = None, scenes=None,
-             candidates: int | None = None) -> dict:
+             candidates: int | None = None, first_seed: int = 0, shared_draws=()) -> dict:
     """Seconds per P_F and per P_L estimate (1000 paired draws), per SCP initialisation and
     per GP-P candidate over grid sizes, with their growth; the convergence study; gp-gpis-opt
     against gp-p, both planning for the lift, over the library; and the bandit study
-    (:func:`bandit`, ``seeds``, ``scenes`` and ``candidates`` its size; ``seeds = 0`` skips
-    it)."""
+    (:func:`bandit`; ``seeds``, ``scenes``, ``candidates``, ``first_seed`` and
+    ``shared_draws`` as there; ``seeds = 0`` skips it)."""
     from harness.scene import library_names, load_scene
 
     study_names = _bandit_scenes(scenes)
@@ -219,7 +219,8 @@ def planning(sizes=PLANNING_SIZES, scene: str = SAMPLING_SCENE, seeds: int | Non
             "planner_scene": PLANNER_SCENE, "scp_s_per_init": scp, "gpp_s_per_candidate": gpp,
             "scp_over_gpp": {m: scp[m] / gpp[m] for m in scp},
             "scp_growth_exponent": growth(list(scp.values())), **_convergence_summary(convergence),
-            "lift_planners": _lift_summary(lift_rows), "bandit": bandit(seeds, study_names, candidates)}
+            "lift_planners": _lift_summary(lift_rows),
+            "bandit": bandit(seeds, study_names, candidates, first_seed, shared_draws)}
 
 
 def _bandit_scenes(scenes) -> list[str]:
@@ -232,24 +233,30 @@ def _bandit_scenes(scenes) -> list[str]:
     return names
 
 
-def bandit(seeds: int | None = None, scenes=None, candidates: int | None = None) -> dict:
+def bandit(seeds: int | None = None, scenes=None, candidates: int | None = None, first_seed: int = 0,
+           shared_draws=()) -> dict:
     """The bandit convergence study (harness/bench/bandit_study.py): per scene (one process
     each) and seed, every gp-bandit policy's best grasp after every round judged on 1000
     evaluation draws against gp-p's choice; the draws and seconds to within 1 % and 3 %,
     and the default planners' plan times. ``seeds`` (default 3; 0 skips the study),
     ``scenes`` (default: the library and the shared outlines) and ``candidates`` (the arms
-    of every run; default 100, gp-p's) set its size."""
+    of every run; default 100, gp-p's) set its size; the seeds are first_seed, first_seed
+    + 1, ... (another first seed gives held-out runs). ``shared_draws`` adds Thompson
+    sampling with each of these values of shared evidence (a sensitivity study)."""
     from harness.bench import bandit_study
 
     seeds = bandit_study.SEEDS if seeds is None else seeds
     candidates = bandit_study.CANDIDATES if candidates is None else int(candidates)
+    shared_draws = [float(v) for v in shared_draws]
     names = _bandit_scenes(scenes)
+    head = {"seeds": seeds, "first_seed": first_seed, "scenes": names, "candidates": candidates,
+            "shared_draws": shared_draws}
     if seeds == 0 or not names:
-        return {"seeds": seeds, "scenes": names, "candidates": candidates, "runs": [], "summary": None}
+        return {**head, "runs": [], "summary": None}
     runs = [run for name in names
-            for run in _in_fresh_process(bandit_study.scene_runs, name, seeds, candidates)]
-    return {"seeds": seeds, "scenes": names, "candidates": candidates, "tolerances": list(bandit_study.TOLERANCES),
-            "adaptive_budget": bandit_study.ADAPTIVE_BUDGET, "runs": runs, "summary": bandit_study.summarise(runs)}
+            for run in _in_fresh_process(bandit_study.scene_runs, name, seeds, candidates, first_seed, shared_draws)]
+    return {**head, "tolerances": list(bandit_study.TOLERANCES), "adaptive_budget": bandit_study.ADAPTIVE_BUDGET,
+            "runs": runs, "summary": bandit_study.summarise(runs)}
 
 
 def _lift_summary(rows: list[dict]) -> dict:
@@ -417,17 +424,18 @@ def lift(trials: int = 16, seed: int = 0) -> dict:
 
 
 def run(which: str = "all", exact_max_mb: float = 2500.0, sizes=None, seeds: int | None = None, scenes=None,
-        candidates: int | None = None) -> dict:
-    """Run the named benchmark(s); returns a JSON-ready dict. ``seeds``, ``scenes`` and
-    ``candidates`` size the bandit study (``bandit``, and inside ``planning``)."""
+        candidates: int | None = None, first_seed: int = 0, shared_draws=()) -> dict:
+    """Run the named benchmark(s); returns a JSON-ready dict. ``seeds``, ``scenes``,
+    ``candidates``, ``first_seed`` and ``shared_draws`` set the bandit study (``bandit``,
+    and inside ``planning``; see :func:`bandit`)."""
     results = {}
     if which in ("sampling", "all"):
         results["sampling"] = sampling(tuple(sizes or SAMPLING_SIZES), exact_max_mb)
     if which in ("planning", "all"):
         results["planning"] = planning(tuple(sizes or PLANNING_SIZES), seeds=seeds, scenes=scenes,
-                                        candidates=candidates)
+                                        candidates=candidates, first_seed=first_seed, shared_draws=shared_draws)
     if which == "bandit":
-        results["bandit"] = bandit(seeds, scenes, candidates)
+        results["bandit"] = bandit(seeds, scenes, candidates, first_seed, shared_draws)
     if which in ("quality", "all"):
         results["quality"] = quality()
     if which in ("physics", "all"):
@@ -534,13 +542,17 @@ def _bandit_lines(res: dict) -> list[str]:
     def num(v, fmt):
         return "never" if v is None else format(v, fmt)
 
-    lines = [f"bandit study: {summary['runs']} runs ({len(res['scenes'])} scenes x {res['seeds']} seeds, "
+    first = res.get("first_seed", 0)
+    seeds = f"seeds {first} to {first + res['seeds'] - 1}" if res["seeds"] > 1 else f"seed {first}"
+    width = max([15] + [len(policy) + 2 for policy in summary["policies"]])
+    scenes = f"{len(res['scenes'])} scene{'' if len(res['scenes']) == 1 else 's'}"
+    lines = [f"bandit study: {summary['runs']} runs ({scenes} x {seeds}, "
              f"{res.get('candidates', 100)} candidates each); the best "
              f"grasp after every round judged on 1000 evaluation draws against gp-p's choice. Draws (and seconds) "
              f"until it stays within 1 % / 3 %: median and 90th percentile over runs (never: not within the "
              f"run's draws), the median of uniform's over the policy's per run, and the share of runs within "
              f"after 1000 draws",
-             f"{'policy':<15}{'median':>14}{'p90':>16}{'seconds':>15}{'uniform/pol':>13}{'at 1000':>11}"
+             f"{'policy':<{width}}{'median':>14}{'p90':>16}{'seconds':>15}{'uniform/pol':>13}{'at 1000':>11}"
              f"{'pull/draw':>10}{'judging':>9}{'plan s':>8}"]
     for policy, row in summary["policies"].items():
         one, three = row["1pct"], row["3pct"]
@@ -548,7 +560,7 @@ def _bandit_lines(res: dict) -> list[str]:
         def pair(key, fmt, row1=one, row3=three):
             return f"{num(row1[key], fmt)} / {num(row3[key], fmt)}"
 
-        lines.append(f"{policy:<15}{pair('median_draws', '.0f'):>14}{pair('p90_draws', '.0f'):>16}"
+        lines.append(f"{policy:<{width}}{pair('median_draws', '.0f'):>14}{pair('p90_draws', '.0f'):>16}"
                      f"{pair('median_seconds', '.3f'):>15}{pair('median_uniform_over_policy_draws', '.1f'):>13}"
                      f"{one['within_after']['1000']:>7.2f}/{three['within_after']['1000']:.2f}"
                      f"{num(row['pull_over_gp_p_draw'], '.2f'):>9}"
@@ -581,7 +593,7 @@ def _bandit_lines(res: dict) -> list[str]:
                 over = "-" if ratio is None else f"{ratio:.1f}x" if ratio >= 0.1 else f"{ratio:.2f}x"
                 cells.append(f"{num(mine, '.0f')} vs {num(theirs, '.0f')} ({over}; "
                              f"{num(c['median_uniform_over_policy_draws'], '.1f')}x)")
-            lines.append(f"  {policy:<15}" + " / ".join(cells))
+            lines.append(f"  {policy:<{width}}" + " / ".join(cells))
     lines.append(f"uniform made gp-p's choice in {summary['uniform_is_gp_p']} of {summary['runs']} runs; "
                  f"pull/draw: seconds per pull over gp-p's per draw, shape samples included; judging: "
                  f"without them")

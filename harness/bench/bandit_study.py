@@ -42,6 +42,9 @@ TOLERANCES = (0.01, 0.03)
 #: Laskey et al.'s Thompson sampling did.
 ALLOCATIONS = {"thompson": ("thompson", None), "thompson-alone": ("thompson", 0.0), "gittins": ("gittins", None),
                "ucb": ("ucb", None), "uniform": ("uniform", None), "pruning": ("pruning", None)}
+#: Labels of the extra Thompson sampling allocations of a sensitivity study
+#: (``--shared-draws``): ``thompson-shared-<value>``.
+SHARED_PREFIX = "thompson-shared-"
 #: Draws after which the study reports the share of runs within each tolerance.
 ANYTIME_BUDGETS = (250, 500, 1000, 2000, 5000)
 EVALUATION_DRAWS = 1000
@@ -56,6 +59,16 @@ OUTLINE_LENGTH = 0.16
 OUTLINE_WIDTH = 0.08
 #: ... and reaches at most this far from its centroid (the grid keeps 2 cells clear).
 OUTLINE_REACH = 0.085
+
+
+def allocations(shared_draws=()) -> dict:
+    """The study's allocations (ALLOCATIONS), plus Thompson sampling with each of
+    ``shared_draws`` (values of gp-bandit's ``shared_draws``), labelled SHARED_PREFIX and
+    the value: a sensitivity study of shared evidence."""
+    table = dict(ALLOCATIONS)
+    for value in shared_draws:
+        table[f"{SHARED_PREFIX}{float(value):g}"] = ("thompson", float(value))
+    return table
 
 
 def study_scenes() -> list[str]:
@@ -88,8 +101,9 @@ def scene_of(name: str) -> Scene:
 
 
 def run(name: str, seed: int, candidates: int = CANDIDATES, samples: int = 1000, budget: int = ADAPTIVE_BUDGET,
-        batch: int | None = None, policies=tuple(ALLOCATIONS), defaults: bool = True) -> dict:
-    """One run: every allocation's curve (``policies``: labels of ALLOCATIONS; draws,
+        batch: int | None = None, policies=None, defaults: bool = True, shared_draws=()) -> dict:
+    """One run: every allocation's curve (``policies``: labels of :func:`allocations` of
+    ``shared_draws``, by default all of them; draws,
     seconds, P_F of its best grasp so far on the evaluation draws, kept at the first round,
     the rounds where that P_F changes and the last), gp-p's plan time and choice, the
     target, and (``defaults``) the default planners' plan times and P_F."""
@@ -124,8 +138,9 @@ def run(name: str, seed: int, candidates: int = CANDIDATES, samples: int = 1000,
     if defaults:
         out["defaults"] = _defaults(problem, scene.name, seed, p_f)
     extra = {} if batch is None else {"batch": batch}
-    for policy in policies:
-        name, shared = ALLOCATIONS[policy]
+    table = allocations(shared_draws)
+    for policy in table if policies is None else policies:
+        name, shared = table[policy]
         full = name in ("uniform", "pruning")
         planner = GPBandit(candidates=candidates, samples=samples, policy=name, shared_draws=shared,
                            budget_draws=candidates * samples if full else budget, **extra)
@@ -156,12 +171,15 @@ def _defaults(problem: Problem, scene: str, seed: int, p_f) -> dict:
     return out
 
 
-def scene_runs(name: str, seeds: int, candidates: int = CANDIDATES, **options) -> list[dict]:
-    """Every seed's run on one scene (one process per scene in the benchmark)."""
+def scene_runs(name: str, seeds: int, candidates: int = CANDIDATES, first_seed: int = 0, shared_draws=(),
+               **options) -> list[dict]:
+    """The runs (:func:`run`) of seeds first_seed, ..., first_seed + seeds - 1 on one scene
+    (one process per scene in the benchmark)."""
     from planners.allocation import gittins_table
 
     gittins_table(GPBandit().discount)  # computed once per process, before any clock starts
-    return [run(name, seed, candidates=candidates, **options) for seed in range(seeds)]
+    return [run(name, seed, candidates=candidates, shared_draws=shared_draws, **options)
+            for seed in range(first_seed, first_seed + seeds)]
 
 
 def reached(curve: list, target: float, tolerance: float):
@@ -176,7 +194,7 @@ def reached(curve: list, target: float, tolerance: float):
     return curve[k][0], curve[k][1]
 
 
-def summarise(runs: list[dict], policies=tuple(ALLOCATIONS)) -> dict:
+def summarise(runs: list[dict], policies=None) -> dict:
     """Per policy and tolerance: the median and 90th percentile of the draws, and the
     median seconds, to reach it (a run that never does counts as infinitely many; an
     infinite statistic is None), how many runs reach it, the median over runs of
@@ -188,10 +206,14 @@ def summarise(runs: list[dict], policies=tuple(ALLOCATIONS)) -> dict:
     candidates are within each tolerance (see :func:`_ceiling`). ``by_scenes``: the draws
     to each tolerance on the library scenes and on the shared outlines apart, with their
     ceilings (see :func:`_by_scenes`). Plus the default planners' plan times and P_F
-    on the library scenes (``make eval``'s)."""
+    on the library scenes (``make eval``'s). ``policies``: the labels summarised, by
+    default ALLOCATIONS' and then any other label the runs hold, in their order; a label
+    is left out unless every run holds it."""
     runs = [r for r in runs if "skipped" not in r]
+    if policies is None:
+        policies = list(ALLOCATIONS) + [p for r in runs for p in r["curves"] if p not in ALLOCATIONS]
     table = {}
-    for policy in (p for p in policies if all(p in r["curves"] for r in runs)):
+    for policy in (p for p in dict.fromkeys(policies) if all(p in r["curves"] for r in runs)):
         row = {}
         for tol in TOLERANCES:
             draws, seconds, ratio_d, ratio_s = _reaching(runs, policy, tol)
