@@ -566,6 +566,12 @@ def _bandit_lines(res: dict) -> list[str]:
                      f"{num(row['pull_over_gp_p_draw'], '.2f'):>9}"
                      f"{num(row.get('judging_over_gp_p'), '.2f'):>9}{num(row['median_plan_s'], '.3f'):>8}")
 
+    def times(v):  # a ratio; None: infinite (uniform never within) or undefined
+        return "inf" if v is None else f"{v:.1f}x" if v >= 0.1 else f"{v:.2f}x"
+
+    def interval(ci):
+        return "[-]" if not ci else f"[{times(ci[0])}, {times(ci[1])}]"
+
     def ceiling(c):
         if not c:
             return "not measured"
@@ -573,16 +579,24 @@ def _bandit_lines(res: dict) -> list[str]:
         def bound(v):  # None: uniform never within, so nothing bounds the ratio
             return "unbounded" if v is None else f"{v:.1f}x"
 
-        cells = [f"{bound(c[k]['of_medians'])} ({bound(c[k]['median_per_run'])} per run; "
+        cells = [f"{bound(c[k]['of_medians'])} {interval(c[k].get('of_medians_ci90'))} "
+                 f"({bound(c[k]['median_per_run'])} per run; "
                  f"{'n/a' if c[k]['share_within'] is None else format(c[k]['share_within'], '.2f')} "
                  f"of the candidates within)" for k in ("3pct", "1pct")]
         return " / ".join(cells)
 
+    if all("uniform_over_policy_of_medians" in row["3pct"] for row in summary["policies"].values()):
+        lines.append("uniform's median draws over the policy's, 3 % / 1 %, with 90 % intervals (the scenes "
+                     "resampled, a scene's seeds together):")
+        for policy, row in summary["policies"].items():
+            lines.append(f"  {policy:<{width}}" + " / ".join(
+                f"{times(row[k]['uniform_over_policy_of_medians']['value'])} "
+                f"{interval(row[k]['uniform_over_policy_of_medians']['ci90'])}" for k in ("3pct", "1pct")))
     lines.append(f"ceiling at 3 % / 1 %, the most any allocation could beat uniform by (uniform's median draws over "
-                 f"the first round's): {ceiling(summary.get('ceiling'))}")
+                 f"the first round's, [90 % interval]): {ceiling(summary.get('ceiling'))}")
     for group, part in summary.get("by_scenes", {}).items():
         lines.append(f"{group} ({part['runs']} runs), draws to 3 % / 1 %, median, against uniform's "
-                     f"(uniform's median over the policy's; the median per-run ratio); ceiling "
+                     f"(uniform's median over the policy's [90 % interval]; the median per-run ratio); ceiling "
                      f"{ceiling(part.get('ceiling'))}:")
         for policy, row in part["policies"].items():
             cells = []
@@ -590,8 +604,10 @@ def _bandit_lines(res: dict) -> list[str]:
                 c = row[key]
                 mine, theirs = c["median_draws"], c["uniform_median_draws"]
                 ratio = None if mine is None or theirs is None else theirs / mine
-                over = "-" if ratio is None else f"{ratio:.1f}x" if ratio >= 0.1 else f"{ratio:.2f}x"
-                cells.append(f"{num(mine, '.0f')} vs {num(theirs, '.0f')} ({over}; "
+                over = "-" if ratio is None else times(ratio)
+                ci = " " + interval(c["uniform_over_policy_of_medians"]["ci90"]) \
+                    if "uniform_over_policy_of_medians" in c else ""
+                cells.append(f"{num(mine, '.0f')} vs {num(theirs, '.0f')} ({over}{ci}; "
                              f"{num(c['median_uniform_over_policy_draws'], '.1f')}x)")
             lines.append(f"  {policy:<{width}}" + " / ".join(cells))
     lines.append(f"uniform made gp-p's choice in {summary['uniform_is_gp_p']} of {summary['runs']} runs; "

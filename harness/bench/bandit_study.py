@@ -45,6 +45,9 @@ ALLOCATIONS = {"thompson": ("thompson", None), "thompson-alone": ("thompson", 0.
 #: Labels of the extra Thompson sampling allocations of a sensitivity study
 #: (``--shared-draws``): ``thompson-shared-<value>``.
 SHARED_PREFIX = "thompson-shared-"
+#: Resamples of the scenes behind the 90 % intervals of the ratios of medians (a cluster
+#: bootstrap: a scene's seeds stay together, as they share its outline and sensor).
+BOOTSTRAP = 2000
 #: Draws after which the study reports the share of runs within each tolerance.
 ANYTIME_BUDGETS = (250, 500, 1000, 2000, 5000)
 EVALUATION_DRAWS = 1000
@@ -198,8 +201,10 @@ def summarise(runs: list[dict], policies=None) -> dict:
     """Per policy and tolerance: the median and 90th percentile of the draws, and the
     median seconds, to reach it (a run that never does counts as infinitely many; an
     infinite statistic is None), how many runs reach it, the median over runs of
-    uniform's draws (seconds) over the policy's, and the share of runs within it after
-    each of ANYTIME_BUDGETS draws (a budgeted planner's view). Per policy also its seconds
+    uniform's draws (seconds) over the policy's, uniform's median draws over the policy's
+    with its 90 % interval (``uniform_over_policy_of_medians``, see :func:`_of_medians`),
+    and the share of runs within it after each of ANYTIME_BUDGETS draws (a budgeted
+    planner's view). Per policy also its seconds
     per pull over gp-p's per draw, with the shape samples (``pull_over_gp_p_draw``) and
     without them (``judging_over_gp_p``, see :func:`_judging`), and its median plan time.
     ``ceiling``: the largest ratio to uniform that any allocation could show, and how many
@@ -223,7 +228,8 @@ def summarise(runs: list[dict], policies=None) -> dict:
                 "median_draws": _quantile(draws, 0.5), "p90_draws": _quantile(draws, 0.9),
                 "median_seconds": _quantile(seconds, 0.5), "reached": sum(math.isfinite(d) for d in draws),
                 "runs": len(runs), "median_uniform_over_policy_draws": _quantile(ratio_d, 0.5),
-                "median_uniform_over_policy_seconds": _quantile(ratio_s, 0.5), "within_after": within}
+                "median_uniform_over_policy_seconds": _quantile(ratio_s, 0.5), "within_after": within,
+                "uniform_over_policy_of_medians": _of_medians(runs, policy, tol)}
         row["median_plan_s"] = _quantile([r["plan_s"][policy] for r in runs], 0.5)
         row["pull_over_gp_p_draw"] = _quantile(
             [(r["seconds"][policy]["allocation"] + r["seconds"][policy]["draws"]) / r["curves"][policy][-1][0]
@@ -257,10 +263,46 @@ def _reaching(runs: list[dict], policy: str, tolerance: float):
     return draws, seconds, ratio_d, ratio_s
 
 
+def _of_medians(runs: list[dict], policy: str, tolerance: float) -> dict:
+    """Uniform's median draws to ``tolerance`` over the policy's (``value``; a run that
+    never gets there counts as infinitely many), with a 90 % interval (``ci90``) from
+    BOOTSTRAP resamples of the scenes with replacement, each bringing all its runs (a
+    cluster bootstrap, percentile interval). Infinite or undefined values are None."""
+    draws = {label: np.array([math.inf if d is None else d
+                              for d in (reached(r["curves"][label], r["target"], tolerance)[0] for r in runs)])
+             for label in ("uniform", policy)}
+    return _bootstrapped(runs, lambda idx: _median_ratio(draws["uniform"][idx], draws[policy][idx]))
+
+
+def _bootstrapped(runs: list[dict], statistic) -> dict:
+    """``statistic(run indices)`` on all the runs and its 90 % percentile interval over
+    BOOTSTRAP resamples of the scenes (see :func:`_of_medians`); the resamples come from
+    a stream of their own, so the interval is the same in every summary of the same runs."""
+    scenes = sorted({r["scene"] for r in runs})
+    members = [np.array([k for k, r in enumerate(runs) if r["scene"] == scene]) for scene in scenes]
+    rng = stream(0, "bandit-study", "bootstrap")
+    values = [statistic(np.concatenate([members[j] for j in rng.integers(0, len(scenes), len(scenes))]))
+              for _ in range(BOOTSTRAP)] if runs else []
+
+    def finite(v):
+        return None if v is None or not math.isfinite(v) else float(v)
+
+    return {"value": finite(statistic(np.arange(len(runs)))) if runs else None,
+            "ci90": [_quantile(values, 0.05), _quantile(values, 0.95)]}
+
+
+def _median_ratio(uniform: np.ndarray, policy: np.ndarray) -> float:
+    """median(uniform) / median(policy), infinities as in :func:`_ratio` (NaN when both are
+    infinite)."""
+    a, b = np.median(uniform), np.median(policy)
+    return _ratio(None if math.isinf(a) else float(a), None if math.isinf(b) else float(b))
+
+
 def _by_scenes(runs: list[dict], policies: list[str]) -> dict:
     """For the library scenes and the shared outlines apart (a group without runs is
     left out): per policy and tolerance, the median draws to reach it, uniform's median,
-    and the median over runs of uniform's draws over the policy's."""
+    the median over runs of uniform's draws over the policy's, and uniform's median over
+    the policy's with its 90 % interval (:func:`_of_medians`)."""
     library = set(library_names())
     groups = {"library": [r for r in runs if r["scene"] in library],
               "shared outlines": [r for r in runs if r["scene"] not in library]}
@@ -276,7 +318,8 @@ def _by_scenes(runs: list[dict], policies: list[str]) -> dict:
                 draws, _, ratio_d, _ = _reaching(members, policy, tol)
                 rows[policy][f"{round(tol * 100)}pct"] = {
                     "median_draws": _quantile(draws, 0.5), "uniform_median_draws": uniform[tol],
-                    "median_uniform_over_policy_draws": _quantile(ratio_d, 0.5)}
+                    "median_uniform_over_policy_draws": _quantile(ratio_d, 0.5),
+                    "uniform_over_policy_of_medians": _of_medians(members, policy, tol)}
         out[group] = {"runs": len(members), "policies": rows, "ceiling": _ceiling(members)}
     return out
 
@@ -286,7 +329,8 @@ def _ceiling(runs: list[dict]) -> dict:
     schedule, and a curve starts after its first round (planners.allocation.FIRST_ROUND
     pulls: uniform's first point), so no policy reaches a tolerance in fewer draws.
     Uniform's draws over the first round's then bound uniform's median over a policy's
-    (``of_medians``) and the median per-run ratio (``median_per_run``). Also the median
+    (``of_medians``, with its 90 % interval over resampled scenes, ``of_medians_ci90``, see
+    :func:`_of_medians`) and the median per-run ratio (``median_per_run``). Also the median
     over runs of the share of candidates whose P_F on the planners' pool is within the
     tolerance of the best one's (``share_within``: how many candidates are nearly as good
     as gp-p's choice; the more, the less any allocation can gain). A bound is None where
@@ -300,8 +344,10 @@ def _ceiling(runs: list[dict]) -> dict:
         key = f"{round(tol * 100)}pct"
         uniform = _reaching(runs, "uniform", tol)[0]
         median = _quantile(uniform, 0.5)
+        draws, rounds = np.array(uniform), np.array(first, dtype=float)
+        interval = _bootstrapped(runs, lambda idx: np.median(draws[idx]) / np.median(rounds[idx]))["ci90"]
         out[key] = {"of_medians": None if median is None else median / _quantile(first, 0.5),
-                    "median_per_run": _quantile([u / f for u, f in zip(uniform, first)], 0.5),
+                    "of_medians_ci90": interval, "median_per_run": _quantile([u / f for u, f in zip(uniform, first)], 0.5),
                     "share_within": _quantile([r["share_within"][key] for r in runs if "share_within" in r], 0.5)}
     return out
 
