@@ -70,7 +70,8 @@ def allocations(shared_draws=()) -> dict:
     the value: a sensitivity study of shared evidence."""
     table = dict(ALLOCATIONS)
     for value in shared_draws:
-        table[f"{SHARED_PREFIX}{float(value):g}"] = ("thompson", float(value))
+        value = float(value) + 0.0  # -0.0 becomes 0.0, so that its label is "...-0"
+        table[f"{SHARED_PREFIX}{value:g}"] = ("thompson", value)
     return table
 
 
@@ -106,10 +107,10 @@ def scene_of(name: str) -> Scene:
 def run(name: str, seed: int, candidates: int = CANDIDATES, samples: int = 1000, budget: int = ADAPTIVE_BUDGET,
         batch: int | None = None, policies=None, defaults: bool = True, shared_draws=()) -> dict:
     """One run: every allocation's curve (``policies``: labels of :func:`allocations` of
-    ``shared_draws``, by default all of them; draws,
-    seconds, P_F of its best grasp so far on the evaluation draws, kept at the first round,
-    the rounds where that P_F changes and the last), gp-p's plan time and choice, the
-    target, and (``defaults``) the default planners' plan times and P_F."""
+    ``shared_draws``, by default all of them; draws, seconds, P_F of its best grasp so far
+    on the evaluation draws, kept at the first round, the rounds where that P_F changes
+    and the last), gp-p's plan time and choice, the target, and (``defaults``) the default
+    planners' plan times and P_F."""
     scene = scene_of(name)
     belief = build_belief(scene, stream(seed, scene.name, 0, "sensor")).prepare()
     problem = Problem.for_belief(belief)
@@ -204,9 +205,9 @@ def summarise(runs: list[dict], policies=None) -> dict:
     uniform's draws (seconds) over the policy's, uniform's median draws over the policy's
     with its 90 % interval (``uniform_over_policy_of_medians``, see :func:`_of_medians`),
     and the share of runs within it after each of ANYTIME_BUDGETS draws (a budgeted
-    planner's view). Per policy also its seconds
-    per pull over gp-p's per draw, with the shape samples (``pull_over_gp_p_draw``) and
-    without them (``judging_over_gp_p``, see :func:`_judging`), and its median plan time.
+    planner's view). Per policy also its seconds per pull over gp-p's per draw, with the
+    shape samples (``pull_over_gp_p_draw``) and without them (``judging_over_gp_p``, see
+    :func:`_judging`), and its median plan time.
     ``ceiling``: the largest ratio to uniform that any allocation could show, and how many
     candidates are within each tolerance (see :func:`_ceiling`). ``by_scenes``: the draws
     to each tolerance on the library scenes and on the shared outlines apart, with their
@@ -347,7 +348,8 @@ def _ceiling(runs: list[dict]) -> dict:
         draws, rounds = np.array(uniform), np.array(first, dtype=float)
         interval = _bootstrapped(runs, lambda idx: np.median(draws[idx]) / np.median(rounds[idx]))["ci90"]
         out[key] = {"of_medians": None if median is None else median / _quantile(first, 0.5),
-                    "of_medians_ci90": interval, "median_per_run": _quantile([u / f for u, f in zip(uniform, first)], 0.5),
+                    "of_medians_ci90": interval,
+                    "median_per_run": _quantile([u / f for u, f in zip(uniform, first)], 0.5),
                     "share_within": _quantile([r["share_within"][key] for r in runs if "share_within" in r], 0.5)}
     return out
 
