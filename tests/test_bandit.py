@@ -584,12 +584,12 @@ def test_the_ceiling_is_uniforms_draws_over_the_first_round():
             for scene, d, s1, s3 in (("a", 40, 0.1, 0.2), ("b", 100, 0.0, 0.5), ("c", 400, 0.3, 0.4))]
     ceiling = _ceiling(runs)
     # 3 %: uniform's median 100 draws over the first round's 20; per run 2, 5 and 20. Three
-    # scenes resampled: the median is 40 (or 400) in 7 of 27 resamples, so the 90 %
+    # scenes resampled: the median is 40 (or 400) in 7 of 27 resamples, so the 95 %
     # interval spans 2 to 20.
-    assert ceiling["3pct"] == {"of_medians": 5.0, "of_medians_ci90": [2.0, 20.0], "median_per_run": 5.0,
+    assert ceiling["3pct"] == {"of_medians": 5.0, "of_medians_ci95": [2.0, 20.0], "median_per_run": 5.0,
                                "share_within": 0.4}
     # 1 %: uniform never gets there, so nothing bounds the others' ratio.
-    assert ceiling["1pct"] == {"of_medians": None, "of_medians_ci90": [None, None], "median_per_run": None,
+    assert ceiling["1pct"] == {"of_medians": None, "of_medians_ci95": [None, None], "median_per_run": None,
                                "share_within": 0.1}
     runs[0]["curves"]["uniform"] = curve(20)  # within from the first round: a ceiling of 1
     assert _ceiling(runs[:1])["3pct"]["of_medians"] == 1.0
@@ -598,7 +598,7 @@ def test_the_ceiling_is_uniforms_draws_over_the_first_round():
 def test_the_ratio_of_medians_has_a_scene_bootstrap_interval():
     """Two scenes, one run each: uniform needs 100 and 20 draws, the policy 10 and 20.
     Resampling the scenes gives {a, a} (ratio 10), {b, b} (1) and {a, b} (medians 60 over
-    15: 4) with chances 1/4, 1/4 and 1/2, so the 90 % interval is [1, 10] around 4."""
+    15: 4) with chances 1/4, 1/4 and 1/2, so the 95 % interval is [1, 10] around 4."""
     from harness.bench.bandit_study import _of_medians
 
     def curve(reach):  # within 3 % from ``reach`` draws on; None: never
@@ -608,13 +608,13 @@ def test_the_ratio_of_medians_has_a_scene_bootstrap_interval():
         return [{"scene": scene, "target": 1.0, "curves": {"uniform": curve(u), "policy": curve(p)}}
                 for scene, u, p in zip("ab", uniform, policy)]
 
-    assert _of_medians(runs((100, 20), (10, 20)), "policy", 0.03) == {"value": 4.0, "ci90": [1.0, 10.0]}
+    assert _of_medians(runs((100, 20), (10, 20)), "policy", 0.03) == {"value": 4.0, "ci95": [1.0, 10.0]}
     # A policy that never gets there counts as infinitely many draws: ratio 0 unless only
     # b is drawn.
-    assert _of_medians(runs((100, 20), (None, 20)), "policy", 0.03) == {"value": 0.0, "ci90": [0.0, 1.0]}
+    assert _of_medians(runs((100, 20), (None, 20)), "policy", 0.03) == {"value": 0.0, "ci95": [0.0, 1.0]}
     # Uniform never gets there on a: the ratio is infinite (None) unless only b is drawn.
-    assert _of_medians(runs((None, 20), (10, 20)), "policy", 0.03) == {"value": None, "ci90": [1.0, None]}
-    assert _of_medians([], "policy", 0.03) == {"value": None, "ci90": [None, None]}
+    assert _of_medians(runs((None, 20), (10, 20)), "policy", 0.03) == {"value": None, "ci95": [1.0, None]}
+    assert _of_medians([], "policy", 0.03) == {"value": None, "ci95": [None, None]}
 
 
 def test_the_study_refuses_unknown_scenes_before_any_work(capsys):

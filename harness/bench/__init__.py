@@ -579,24 +579,24 @@ def _bandit_lines(res: dict) -> list[str]:
         def bound(v):  # None: uniform never within, so nothing bounds the ratio
             return "unbounded" if v is None else f"{v:.1f}x"
 
-        cells = [f"{bound(c[k]['of_medians'])} {interval(c[k].get('of_medians_ci90'))} "
+        cells = [f"{bound(c[k]['of_medians'])} {interval(c[k].get('of_medians_ci95'))} "
                  f"({bound(c[k]['median_per_run'])} per run; "
                  f"{'n/a' if c[k]['share_within'] is None else format(c[k]['share_within'], '.2f')} "
                  f"of the candidates within)" for k in ("3pct", "1pct")]
         return " / ".join(cells)
 
     if all("uniform_over_policy_of_medians" in row["3pct"] for row in summary["policies"].values()):
-        lines.append("uniform's median draws over the policy's, 3 % / 1 %, with 90 % intervals (the scenes "
+        lines.append("uniform's median draws over the policy's, 3 % / 1 %, with 95 % intervals (the scenes "
                      "resampled, a scene's seeds together):")
         for policy, row in summary["policies"].items():
             lines.append(f"  {policy:<{width}}" + " / ".join(
                 f"{times(row[k]['uniform_over_policy_of_medians']['value'])} "
-                f"{interval(row[k]['uniform_over_policy_of_medians']['ci90'])}" for k in ("3pct", "1pct")))
+                f"{interval(row[k]['uniform_over_policy_of_medians']['ci95'])}" for k in ("3pct", "1pct")))
     lines.append(f"ceiling at 3 % / 1 %, the most any allocation could beat uniform by (uniform's median draws over "
-                 f"the first round's, [90 % interval]): {ceiling(summary.get('ceiling'))}")
+                 f"the first round's, [95 % interval]): {ceiling(summary.get('ceiling'))}")
     for group, part in summary.get("by_scenes", {}).items():
         lines.append(f"{group} ({part['runs']} runs), draws to 3 % / 1 %, median, against uniform's "
-                     f"(uniform's median over the policy's [90 % interval]; the median per-run ratio); ceiling "
+                     f"(uniform's median over the policy's [95 % interval]; the median per-run ratio); ceiling "
                      f"{ceiling(part.get('ceiling'))}:")
         for policy, row in part["policies"].items():
             cells = []
@@ -605,7 +605,7 @@ def _bandit_lines(res: dict) -> list[str]:
                 mine, theirs = c["median_draws"], c["uniform_median_draws"]
                 ratio = None if mine is None or theirs is None else theirs / mine
                 over = "-" if ratio is None else times(ratio)
-                ci = " " + interval(c["uniform_over_policy_of_medians"]["ci90"]) \
+                ci = " " + interval(c["uniform_over_policy_of_medians"]["ci95"]) \
                     if "uniform_over_policy_of_medians" in c else ""
                 cells.append(f"{num(mine, '.0f')} vs {num(theirs, '.0f')} ({over}{ci}; "
                              f"{num(c['median_uniform_over_policy_draws'], '.1f')}x)")

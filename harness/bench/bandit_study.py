@@ -45,7 +45,7 @@ ALLOCATIONS = {"thompson": ("thompson", None), "thompson-alone": ("thompson", 0.
 #: Labels of the extra Thompson sampling allocations of a sensitivity study
 #: (``--shared-draws``): ``thompson-shared-<value>``.
 SHARED_PREFIX = "thompson-shared-"
-#: Resamples of the scenes behind the 90 % intervals of the ratios of medians (a cluster
+#: Resamples of the scenes behind the 95 % intervals of the ratios of medians (a cluster
 #: bootstrap: a scene's seeds stay together, as they share its outline and sensor).
 BOOTSTRAP = 2000
 #: Draws after which the study reports the share of runs within each tolerance.
@@ -203,7 +203,7 @@ def summarise(runs: list[dict], policies=None) -> dict:
     median seconds, to reach it (a run that never does counts as infinitely many; an
     infinite statistic is None), how many runs reach it, the median over runs of
     uniform's draws (seconds) over the policy's, uniform's median draws over the policy's
-    with its 90 % interval (``uniform_over_policy_of_medians``, see :func:`_of_medians`),
+    with its 95 % interval (``uniform_over_policy_of_medians``, see :func:`_of_medians`),
     and the share of runs within it after each of ANYTIME_BUDGETS draws (a budgeted
     planner's view). Per policy also its seconds per pull over gp-p's per draw, with the
     shape samples (``pull_over_gp_p_draw``) and without them (``judging_over_gp_p``, see
@@ -266,7 +266,7 @@ def _reaching(runs: list[dict], policy: str, tolerance: float):
 
 def _of_medians(runs: list[dict], policy: str, tolerance: float) -> dict:
     """Uniform's median draws to ``tolerance`` over the policy's (``value``; a run that
-    never gets there counts as infinitely many), with a 90 % interval (``ci90``) from
+    never gets there counts as infinitely many), with a 95 % interval (``ci95``) from
     BOOTSTRAP resamples of the scenes with replacement, each bringing all its runs (a
     cluster bootstrap, percentile interval). Infinite or undefined values are None."""
     draws = {label: np.array([math.inf if d is None else d
@@ -276,7 +276,7 @@ def _of_medians(runs: list[dict], policy: str, tolerance: float) -> dict:
 
 
 def _bootstrapped(runs: list[dict], statistic) -> dict:
-    """``statistic(run indices)`` on all the runs and its 90 % percentile interval over
+    """``statistic(run indices)`` on all the runs and its 95 % percentile interval over
     BOOTSTRAP resamples of the scenes (see :func:`_of_medians`); the resamples come from
     a stream of their own, so the interval is the same in every summary of the same runs."""
     scenes = sorted({r["scene"] for r in runs})
@@ -289,7 +289,7 @@ def _bootstrapped(runs: list[dict], statistic) -> dict:
         return None if v is None or not math.isfinite(v) else float(v)
 
     return {"value": finite(statistic(np.arange(len(runs)))) if runs else None,
-            "ci90": [_quantile(values, 0.05), _quantile(values, 0.95)]}
+            "ci95": [_quantile(values, 0.025), _quantile(values, 0.975)]}
 
 
 def _median_ratio(uniform: np.ndarray, policy: np.ndarray) -> float:
@@ -303,7 +303,7 @@ def _by_scenes(runs: list[dict], policies: list[str]) -> dict:
     """For the library scenes and the shared outlines apart (a group without runs is
     left out): per policy and tolerance, the median draws to reach it, uniform's median,
     the median over runs of uniform's draws over the policy's, and uniform's median over
-    the policy's with its 90 % interval (:func:`_of_medians`)."""
+    the policy's with its 95 % interval (:func:`_of_medians`)."""
     library = set(library_names())
     groups = {"library": [r for r in runs if r["scene"] in library],
               "shared outlines": [r for r in runs if r["scene"] not in library]}
@@ -330,7 +330,7 @@ def _ceiling(runs: list[dict]) -> dict:
     schedule, and a curve starts after its first round (planners.allocation.FIRST_ROUND
     pulls: uniform's first point), so no policy reaches a tolerance in fewer draws.
     Uniform's draws over the first round's then bound uniform's median over a policy's
-    (``of_medians``, with its 90 % interval over resampled scenes, ``of_medians_ci90``, see
+    (``of_medians``, with its 95 % interval over resampled scenes, ``of_medians_ci95``, see
     :func:`_of_medians`) and the median per-run ratio (``median_per_run``). Also the median
     over runs of the share of candidates whose P_F on the planners' pool is within the
     tolerance of the best one's (``share_within``: how many candidates are nearly as good
@@ -346,9 +346,9 @@ def _ceiling(runs: list[dict]) -> dict:
         uniform = _reaching(runs, "uniform", tol)[0]
         median = _quantile(uniform, 0.5)
         draws, rounds = np.array(uniform), np.array(first, dtype=float)
-        interval = _bootstrapped(runs, lambda idx: np.median(draws[idx]) / np.median(rounds[idx]))["ci90"]
+        interval = _bootstrapped(runs, lambda idx: np.median(draws[idx]) / np.median(rounds[idx]))["ci95"]
         out[key] = {"of_medians": None if median is None else median / _quantile(first, 0.5),
-                    "of_medians_ci90": interval,
+                    "of_medians_ci95": interval,
                     "median_per_run": _quantile([u / f for u, f in zip(uniform, first)], 0.5),
                     "share_within": _quantile([r["share_within"][key] for r in runs if "share_within" in r], 0.5)}
     return out
