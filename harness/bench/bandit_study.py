@@ -207,14 +207,13 @@ def summarise(runs: list[dict], policies=None) -> dict:
     and the share of runs within it after each of ANYTIME_BUDGETS draws (a budgeted
     planner's view). Per policy also its seconds per pull over gp-p's per draw, with the
     shape samples (``pull_over_gp_p_draw``) and without them (``judging_over_gp_p``, see
-    :func:`_judging`), and its median plan time.
-    ``ceiling``: the largest ratio to uniform that any allocation could show, and how many
-    candidates are within each tolerance (see :func:`_ceiling`). ``by_scenes``: the draws
-    to each tolerance on the library scenes and on the shared outlines apart, with their
-    ceilings (see :func:`_by_scenes`). Plus the default planners' plan times and P_F
-    on the library scenes (``make eval``'s). ``policies``: the labels summarised, by
-    default ALLOCATIONS' and then any other label the runs hold, in their order; a label
-    is left out unless every run holds it."""
+    :func:`_judging`), and its median plan time. ``ceiling``: the largest ratio to uniform
+    that any allocation could show, and how many candidates are within each tolerance
+    (see :func:`_ceiling`). ``by_scenes``: the draws to each tolerance on the library
+    scenes and on the shared outlines apart, with their ceilings (see :func:`_by_scenes`).
+    Plus the default planners' plan times and P_F on the library scenes (``make eval``'s).
+    ``policies``: the labels summarised, by default ALLOCATIONS' and then any other label
+    the runs hold, in their order; a label is left out unless every run holds it."""
     runs = [r for r in runs if "skipped" not in r]
     if policies is None:
         policies = list(ALLOCATIONS) + [p for r in runs for p in r["curves"] if p not in ALLOCATIONS]
@@ -344,11 +343,9 @@ def _ceiling(runs: list[dict]) -> dict:
     for tol in TOLERANCES:
         key = f"{round(tol * 100)}pct"
         uniform = _reaching(runs, "uniform", tol)[0]
-        median = _quantile(uniform, 0.5)
         draws, rounds = np.array(uniform), np.array(first, dtype=float)
-        interval = _bootstrapped(runs, lambda idx: np.median(draws[idx]) / np.median(rounds[idx]))["ci95"]
-        out[key] = {"of_medians": None if median is None else median / _quantile(first, 0.5),
-                    "of_medians_ci95": interval,
+        bound = _bootstrapped(runs, lambda idx: np.median(draws[idx]) / np.median(rounds[idx]))
+        out[key] = {"of_medians": bound["value"], "of_medians_ci95": bound["ci95"],
                     "median_per_run": _quantile([u / f for u, f in zip(uniform, first)], 0.5),
                     "share_within": _quantile([r["share_within"][key] for r in runs if "share_within" in r], 0.5)}
     return out
