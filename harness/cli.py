@@ -56,9 +56,9 @@ _sizes = _checked(lambda t: [int(v) for v in t.split(",")], lambda v: len(v) > 0
                   "comma-separated integers like 25,40,55")
 _study_seeds = _checked(int, lambda v: 0 <= v <= 1000, "an integer from 0 to 1000")
 _study_candidates = _checked(int, lambda v: 1 <= v <= 10_000, "an integer from 1 to 10000")
-_shared_draws = _checked(lambda t: [float(v) for v in t.split(",")],
-                         lambda v: all(0.0 <= x <= 100_000.0 for x in v),
-                         "comma-separated numbers from 0 to 100000, like 0,10,30")
+_draw_counts = _checked(lambda t: [float(v) for v in t.split(",")],
+                        lambda v: all(0.0 <= x <= 100_000.0 for x in v),
+                        "comma-separated numbers from 0 to 100000, like 0,10,30")
 _names = _checked(lambda t: [v.strip() for v in t.split(",")], lambda v: all(v),
                   "comma-separated scene names like disk,tape")
 
@@ -349,7 +349,7 @@ def _bench(args) -> int:
 
     results = bench.run(args.which, exact_max_mb=args.exact_max_mb, sizes=args.sizes, seeds=args.seeds,
                         scenes=args.scenes, candidates=args.candidates, first_seed=args.first_seed,
-                        shared_draws=args.shared_draws)
+                        shared_draws=args.shared_draws, prior_draws=args.prior_draws)
     if args.json:
         print(json.dumps(results, indent=2))
     else:
@@ -473,10 +473,14 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--first-seed", type=_seed, default=0,
                        help="the bandit study's first seed (default 0; its runs use seeds FIRST_SEED to "
                             "FIRST_SEED + seeds - 1, so another value gives held-out runs)")
-    bench.add_argument("--shared-draws", type=_shared_draws, default=(),
+    bench.add_argument("--shared-draws", type=_draw_counts, default=(),
                        help="also run Thompson sampling with each of these values of gp-bandit's "
                             "shared_draws (comma-separated; labelled thompson-shared-VALUE): a sensitivity "
                             "study of shared evidence")
+    bench.add_argument("--prior-draws", type=_draw_counts, default=(),
+                       help="also run Thompson sampling with each of these values of gp-bandit's "
+                            "prior_draws (comma-separated; labelled thompson-prior-VALUE): a sensitivity "
+                            "study of the model prior's weight")
     bench.set_defaults(func=_bench)
     return parser
 

@@ -265,8 +265,9 @@ def runtime_figure(bench: dict):
 
 
 #: Colours of the bandit policies in the study's figure.
-POLICY_COLOURS = {"thompson": "tab:red", "thompson-alone": "tab:pink", "gittins": "tab:purple", "ucb": "tab:orange",
-                  "uniform": "tab:blue", "pruning": "tab:green"}
+POLICY_COLOURS = {"thompson": "tab:red", "thompson-no-model": "tab:brown", "thompson-alone": "tab:pink",
+                  "gittins": "tab:purple", "ucb": "tab:orange", "uniform": "tab:blue", "uniform-model": "tab:cyan",
+                  "pruning": "tab:green"}
 
 
 def bandit_figure(study: dict):

@@ -41,6 +41,17 @@ _W = np.array([wa * wb for wa in _NODE_W for wb in _NODE_W])
 _NOMINAL = int(np.flatnonzero((_K == 0).all(axis=1))[0])
 #: Posterior shape samples behind the centre of mass's mean and spread (quality "lift").
 COM_SAMPLES = 64
+#: The smoothing of the friction cone's edge (degrees): the default ``temperature_deg``.
+TEMPERATURE_DEG = 5.0
+
+
+def model_quality(problem: Problem, grasps: np.ndarray, mass: MassBelief | None = None,
+                  temperature_deg: float = TEMPERATURE_DEG) -> np.ndarray:
+    """The surrogate P~_F (or P~_L with a MassBelief) of jaw-start grasps (G, 2, 2) in
+    metres: the analytic model gp-gpis-opt optimises, without drawing a shape. gp-bandit
+    takes its prior from it."""
+    objective = SurrogateObjective(problem, 0.0, math.radians(temperature_deg), mass)
+    return np.clip(objective.surrogate(np.asarray(grasps, dtype=float).reshape(-1, 4) / objective.h), 0.0, 1.0)
 
 
 class GPGPISOpt(Planner):
@@ -50,7 +61,8 @@ class GPGPISOpt(Planner):
               "temperature_deg": (0.1, 45.0), "max_iterations": (1, 1000), "finalists": (0, 1000),
               "rerank_samples": (1, 10_000), "angular_noise_deg": (0.0, 90.0)}
 
-    def __init__(self, initialisations: int = 10, screen: int = 100, nu: float = 1.0, temperature_deg: float = 5.0,
+    def __init__(self, initialisations: int = 10, screen: int = 100, nu: float = 1.0,
+                 temperature_deg: float = TEMPERATURE_DEG,
                  max_iterations: int = 20, finalists: int = 0, rerank_samples: int = 200,
                  angular_noise_deg: float = 10.0, quality: str = "force_closure"):
         if min(initialisations, screen, max_iterations, rerank_samples) < 1 or finalists < 0:

@@ -90,7 +90,7 @@ def test_bench_planning_json_reports_seconds_per_estimate():
                            "--json"], capture_output=True, text=True, timeout=600, check=True)
     result = json.loads(proc.stdout)
     assert result["bandit"] == {"seeds": 0, "first_seed": 0, "scenes": result["bandit"]["scenes"], "candidates": 100,
-                                "shared_draws": [], "runs": [], "summary": None}
+                                "shared_draws": [], "prior_draws": [], "runs": [], "summary": None}
     assert [r["M"] for r in result["rows"]] == [20, 25]
     assert all(r["p_f_s"] > 0 and 0 <= r["p_f"] <= 1 for r in result["rows"])
     assert result["p_f_s_at_50"] is None and isinstance(result["p_f_growth_exponent"], float)

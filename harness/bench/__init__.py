@@ -187,12 +187,12 @@ def _planner_row(scene_name: str, size: int) -> dict:
 
 
 def planning(sizes=PLANNING_SIZES, scene: str = SAMPLING_SCENE, seeds: int | None = None, scenes=None,
-             candidates: int | None = None, first_seed: int = 0, shared_draws=()) -> dict:
+             candidates: int | None = None, first_seed: int = 0, shared_draws=(), prior_draws=()) -> dict:
     """Seconds per P_F and per P_L estimate (1000 paired draws), per SCP initialisation and
     per GP-P candidate over grid sizes, with their growth; the convergence study; gp-gpis-opt
     against gp-p, both planning for the lift, over the library; and the bandit study
-    (:func:`bandit`; ``seeds``, ``scenes``, ``candidates``, ``first_seed`` and
-    ``shared_draws`` as there; ``seeds = 0`` skips it)."""
+    (:func:`bandit`; ``seeds``, ``scenes``, ``candidates``, ``first_seed``,
+    ``shared_draws`` and ``prior_draws`` as there; ``seeds = 0`` skips it)."""
     from harness.scene import library_names, load_scene
 
     study_names = _bandit_scenes(scenes)
@@ -220,7 +220,7 @@ def planning(sizes=PLANNING_SIZES, scene: str = SAMPLING_SCENE, seeds: int | Non
             "scp_over_gpp": {m: scp[m] / gpp[m] for m in scp},
             "scp_growth_exponent": growth(list(scp.values())), **_convergence_summary(convergence),
             "lift_planners": _lift_summary(lift_rows),
-            "bandit": bandit(seeds, study_names, candidates, first_seed, shared_draws)}
+            "bandit": bandit(seeds, study_names, candidates, first_seed, shared_draws, prior_draws)}
 
 
 def _bandit_scenes(scenes) -> list[str]:
@@ -234,27 +234,30 @@ def _bandit_scenes(scenes) -> list[str]:
 
 
 def bandit(seeds: int | None = None, scenes=None, candidates: int | None = None, first_seed: int = 0,
-           shared_draws=()) -> dict:
+           shared_draws=(), prior_draws=()) -> dict:
     """The bandit convergence study (harness/bench/bandit_study.py): per scene (one process
     each) and seed, every gp-bandit policy's best grasp after every round judged on 1000
     evaluation draws against gp-p's choice; the draws and seconds to within 1 % and 3 %,
     and the default planners' plan times. ``seeds`` (default 3; 0 skips the study),
     ``scenes`` (default: the library and the shared outlines) and ``candidates`` (the arms
     of every run; default 100, gp-p's) set its size; the seeds are first_seed, first_seed
-    + 1, ... (another first seed gives held-out runs). ``shared_draws`` adds Thompson
-    sampling with each of these values of shared evidence (a sensitivity study)."""
+    + 1, ... (another first seed gives held-out runs). ``shared_draws`` and
+    ``prior_draws`` add Thompson sampling with each of these values of shared evidence
+    and of the model prior's weight (sensitivity studies)."""
     from harness.bench import bandit_study
 
     seeds = bandit_study.SEEDS if seeds is None else seeds
     candidates = bandit_study.CANDIDATES if candidates is None else int(candidates)
     shared_draws = [float(v) for v in shared_draws]
+    prior_draws = [float(v) for v in prior_draws]
     names = _bandit_scenes(scenes)
     head = {"seeds": seeds, "first_seed": first_seed, "scenes": names, "candidates": candidates,
-            "shared_draws": shared_draws}
+            "shared_draws": shared_draws, "prior_draws": prior_draws}
     if seeds == 0 or not names:
         return {**head, "runs": [], "summary": None}
     runs = [run for name in names
-            for run in _in_fresh_process(bandit_study.scene_runs, name, seeds, candidates, first_seed, shared_draws)]
+            for run in _in_fresh_process(bandit_study.scene_runs, name, seeds, candidates, first_seed, shared_draws,
+                                         prior_draws)]
     return {**head, "tolerances": list(bandit_study.TOLERANCES), "adaptive_budget": bandit_study.ADAPTIVE_BUDGET,
             "runs": runs, "summary": bandit_study.summarise(runs)}
 
@@ -424,18 +427,19 @@ def lift(trials: int = 16, seed: int = 0) -> dict:
 
 
 def run(which: str = "all", exact_max_mb: float = 2500.0, sizes=None, seeds: int | None = None, scenes=None,
-        candidates: int | None = None, first_seed: int = 0, shared_draws=()) -> dict:
+        candidates: int | None = None, first_seed: int = 0, shared_draws=(), prior_draws=()) -> dict:
     """Run the named benchmark(s); returns a JSON-ready dict. ``seeds``, ``scenes``,
-    ``candidates``, ``first_seed`` and ``shared_draws`` set the bandit study (``bandit``,
-    and inside ``planning``; see :func:`bandit`)."""
+    ``candidates``, ``first_seed``, ``shared_draws`` and ``prior_draws`` set the bandit
+    study (``bandit``, and inside ``planning``; see :func:`bandit`)."""
     results = {}
     if which in ("sampling", "all"):
         results["sampling"] = sampling(tuple(sizes or SAMPLING_SIZES), exact_max_mb)
     if which in ("planning", "all"):
         results["planning"] = planning(tuple(sizes or PLANNING_SIZES), seeds=seeds, scenes=scenes,
-                                        candidates=candidates, first_seed=first_seed, shared_draws=shared_draws)
+                                        candidates=candidates, first_seed=first_seed, shared_draws=shared_draws,
+                                        prior_draws=prior_draws)
     if which == "bandit":
-        results["bandit"] = bandit(seeds, scenes, candidates, first_seed, shared_draws)
+        results["bandit"] = bandit(seeds, scenes, candidates, first_seed, shared_draws, prior_draws)
     if which in ("quality", "all"):
         results["quality"] = quality()
     if which in ("physics", "all"):
@@ -592,6 +596,11 @@ def _bandit_lines(res: dict) -> list[str]:
             lines.append(f"  {policy:<{width}}" + " / ".join(
                 f"{times(row[k]['uniform_over_policy_of_medians']['value'])} "
                 f"{interval(row[k]['uniform_over_policy_of_medians']['ci95'])}" for k in ("3pct", "1pct")))
+    model = summary.get("model")
+    if model:
+        lines.append(f"the model alone (the candidate of highest P~_F, before any draw), {model['runs']} runs: P_F "
+                     f"{model['mean_over_target']:.3f} of the target on average; within 1 % / 3 % in "
+                     f"{model['within']['1pct']:.2f} / {model['within']['3pct']:.2f} of the runs")
     lines.append(f"ceiling at 3 % / 1 %, the most any allocation could beat uniform by (uniform's median draws over "
                  f"the first round's, [95 % interval]): {ceiling(summary.get('ceiling'))}")
     for group, part in summary.get("by_scenes", {}).items():

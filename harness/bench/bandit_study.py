@@ -26,6 +26,7 @@ from harness.scene import Scene, library_names, load_scene, parse_scene
 from harness.seeding import stream
 from planners.base import Problem
 from planners.gp_bandit import GPBandit
+from planners.allocation import PRIOR_DRAWS
 from planners.gp_p import GPP
 from planners.registry import make_planner
 
@@ -36,15 +37,23 @@ SEEDS = 3
 #: et al.'s count.
 CANDIDATES = 100
 TOLERANCES = (0.01, 0.03)
-#: The study's allocations, label: (gp-bandit's policy, its shared_draws; None: the
-#: default). "thompson" is gp-bandit's default, whose posteriors share evidence between
-#: overlapping candidates; "thompson-alone" judges every arm on its own draws only, as
-#: Laskey et al.'s Thompson sampling did.
-ALLOCATIONS = {"thompson": ("thompson", None), "thompson-alone": ("thompson", 0.0), "gittins": ("gittins", None),
-               "ucb": ("ucb", None), "uniform": ("uniform", None), "pruning": ("pruning", None)}
-#: Labels of the extra Thompson sampling allocations of a sensitivity study
-#: (``--shared-draws``): ``thompson-shared-<value>``.
+#: The study's allocations, label: (gp-bandit's policy, its shared_draws, its
+#: prior_draws; None: the default). "thompson" is gp-bandit's default, whose posteriors
+#: start from the analytic model's prior and share evidence between overlapping
+#: candidates; "thompson-no-model" shares evidence under the uniform prior;
+#: "thompson-alone" judges every arm on its own draws under the uniform prior, as Laskey
+#: et al.'s Thompson sampling did. "uniform-model" is uniform allocation answering with
+#: the model's prior in its posteriors: what the model adds to the answer without
+#: changing where the draws go.
+ALLOCATIONS = {"thompson": ("thompson", None, None), "thompson-no-model": ("thompson", None, 0.0),
+               "thompson-alone": ("thompson", 0.0, 0.0), "gittins": ("gittins", None, None),
+               "ucb": ("ucb", None, None), "uniform": ("uniform", None, None),
+               "uniform-model": ("uniform", None, PRIOR_DRAWS), "pruning": ("pruning", None, None)}
+#: Labels of the extra Thompson sampling allocations of the sensitivity studies
+#: (``--shared-draws``, ``--prior-draws``): ``thompson-shared-<value>`` and
+#: ``thompson-prior-<value>``.
 SHARED_PREFIX = "thompson-shared-"
+PRIOR_PREFIX = "thompson-prior-"
 #: Resamples of the scenes behind the 95 % intervals of the ratios of medians (a cluster
 #: bootstrap: a scene's seeds stay together, as they share its outline and sensor).
 BOOTSTRAP = 2000
@@ -64,14 +73,18 @@ OUTLINE_WIDTH = 0.08
 OUTLINE_REACH = 0.085
 
 
-def allocations(shared_draws=()) -> dict:
+def allocations(shared_draws=(), prior_draws=()) -> dict:
     """The study's allocations (ALLOCATIONS), plus Thompson sampling with each of
     ``shared_draws`` (values of gp-bandit's ``shared_draws``), labelled SHARED_PREFIX and
-    the value: a sensitivity study of shared evidence."""
+    the value, and with each of ``prior_draws``, labelled PRIOR_PREFIX and the value (the
+    other parameter at its default): sensitivity studies of shared evidence and of the
+    model prior."""
     table = dict(ALLOCATIONS)
-    for value in shared_draws:
-        value = float(value) + 0.0  # -0.0 becomes 0.0, so that its label is "...-0"
-        table[f"{SHARED_PREFIX}{value:g}"] = ("thompson", value)
+    for prefix, values in ((SHARED_PREFIX, shared_draws), (PRIOR_PREFIX, prior_draws)):
+        for value in values:
+            value = float(value) + 0.0  # -0.0 becomes 0.0, so that its label is "...-0"
+            table[f"{prefix}{value:g}"] = ("thompson", value, None) if prefix == SHARED_PREFIX else \
+                ("thompson", None, value)
     return table
 
 
@@ -105,12 +118,14 @@ def scene_of(name: str) -> Scene:
 
 
 def run(name: str, seed: int, candidates: int = CANDIDATES, samples: int = 1000, budget: int = ADAPTIVE_BUDGET,
-        batch: int | None = None, policies=None, defaults: bool = True, shared_draws=()) -> dict:
+        batch: int | None = None, policies=None, defaults: bool = True, shared_draws=(), prior_draws=()) -> dict:
     """One run: every allocation's curve (``policies``: labels of :func:`allocations` of
-    ``shared_draws``, by default all of them; draws, seconds, P_F of its best grasp so far
-    on the evaluation draws, kept at the first round, the rounds where that P_F changes
-    and the last), gp-p's plan time and choice, the target, and (``defaults``) the default
-    planners' plan times and P_F."""
+    ``shared_draws`` and ``prior_draws``, by default all of them; draws, seconds, P_F of
+    its best grasp so far on the evaluation draws, kept at the first round, the rounds
+    where that P_F changes and the last), gp-p's plan time and choice, the target, the P_F
+    of the model's best candidate (``model_p_f``: the answer before any draw, from the
+    first allocation with the model prior), and (``defaults``) the default planners' plan
+    times and P_F."""
     scene = scene_of(name)
     belief = build_belief(scene, stream(seed, scene.name, 0, "sensor")).prepare()
     problem = Problem.for_belief(belief)
@@ -142,12 +157,12 @@ def run(name: str, seed: int, candidates: int = CANDIDATES, samples: int = 1000,
     if defaults:
         out["defaults"] = _defaults(problem, scene.name, seed, p_f)
     extra = {} if batch is None else {"batch": batch}
-    table = allocations(shared_draws)
+    table = allocations(shared_draws, prior_draws)
     for policy in table if policies is None else policies:
-        name, shared = table[policy]
+        name, shared, prior = table[policy]
         full = name in ("uniform", "pruning")
         planner = GPBandit(candidates=candidates, samples=samples, policy=name, shared_draws=shared,
-                           budget_draws=candidates * samples if full else budget, **extra)
+                           prior_draws=prior, budget_draws=candidates * samples if full else budget, **extra)
         record: list = []
         t0 = time.perf_counter()
         plan = planner.plan(problem, stream(seed, scene.name, 0, *planner_stream), record=record)
@@ -156,6 +171,8 @@ def run(name: str, seed: int, candidates: int = CANDIDATES, samples: int = 1000,
         curve = [(draws, seconds, p_f(grasp)) for seconds, draws, grasp in record]
         out["curves"][policy] = [point for k, point in enumerate(curve)
                                  if k in (0, len(curve) - 1) or point[2] != curve[k - 1][2]]
+        if planner.model_ is not None and "model_p_f" not in out:
+            out["model_p_f"] = p_f(planner.grasps_[int(np.argmax(planner.model_))])
         if policy == "uniform":
             out["uniform_is_gp_p"] = bool(np.array_equal(record[-1][2], gpp.grasp.array)) if full else None
     return out
@@ -176,13 +193,13 @@ def _defaults(problem: Problem, scene: str, seed: int, p_f) -> dict:
 
 
 def scene_runs(name: str, seeds: int, candidates: int = CANDIDATES, first_seed: int = 0, shared_draws=(),
-               **options) -> list[dict]:
+               prior_draws=(), **options) -> list[dict]:
     """The runs (:func:`run`) of seeds first_seed, ..., first_seed + seeds - 1 on one scene
     (one process per scene in the benchmark)."""
     from planners.allocation import gittins_table
 
     gittins_table(GPBandit().discount)  # computed once per process, before any clock starts
-    return [run(name, seed, candidates=candidates, shared_draws=shared_draws, **options)
+    return [run(name, seed, candidates=candidates, shared_draws=shared_draws, prior_draws=prior_draws, **options)
             for seed in range(first_seed, first_seed + seeds)]
 
 
@@ -211,7 +228,8 @@ def summarise(runs: list[dict], policies=None) -> dict:
     that any allocation could show, and how many candidates are within each tolerance
     (see :func:`_ceiling`). ``by_scenes``: the draws to each tolerance on the library
     scenes and on the shared outlines apart, with their ceilings (see :func:`_by_scenes`).
-    Plus the default planners' plan times and P_F on the library scenes (``make eval``'s).
+    ``model``: the model's best candidate, before any draw (see :func:`_model`). Plus the
+    default planners' plan times and P_F on the library scenes (``make eval``'s).
     ``policies``: the labels summarised, by default ALLOCATIONS' and then any other label
     the runs hold, in their order; a label is left out unless every run holds it."""
     runs = [r for r in runs if "skipped" not in r]
@@ -243,10 +261,23 @@ def summarise(runs: list[dict], policies=None) -> dict:
         defaults[name] = {"median_plan_s": _quantile([d["plan_s"] for d in rows], 0.5),
                           "mean_plan_s": float(np.mean([d["plan_s"] for d in rows])) if rows else None,
                           "mean_p_f": float(np.mean([d["p_f"] for d in rows])) if rows else None, "runs": len(rows)}
-    return {"policies": table, "ceiling": _ceiling(runs), "by_scenes": _by_scenes(runs, list(table)),
+    return {"policies": table, "model": _model(runs), "ceiling": _ceiling(runs),
+            "by_scenes": _by_scenes(runs, list(table)),
             "median_gp_p_s": _quantile([r["gp_p_s"] for r in runs], 0.5),
             "uniform_is_gp_p": sum(bool(r.get("uniform_is_gp_p")) for r in runs), "runs": len(runs),
             "library_defaults": defaults}
+
+
+def _model(runs: list[dict]) -> dict | None:
+    """The answer of the model alone (the candidate of highest P~_F, before any draw), over
+    the runs that hold it: the mean of its P_F over the target, and the share of runs in
+    which it is within each tolerance of the target (None when no run holds it)."""
+    runs = [r for r in runs if "model_p_f" in r]
+    if not runs:
+        return None
+    ratio = np.array([r["model_p_f"] / r["target"] if r["target"] > 0 else 1.0 for r in runs])
+    return {"runs": len(runs), "mean_over_target": float(ratio.mean()),
+            "within": {f"{round(tol * 100)}pct": float(np.mean(ratio >= 1.0 - tol)) for tol in TOLERANCES}}
 
 
 def _reaching(runs: list[dict], policy: str, tolerance: float):
