@@ -32,7 +32,7 @@ class GPBandit(Planner):
               "shared_draws": (0.0, 100_000.0), "prior_draws": (0.0, 100_000.0)}
 
     def __init__(self, candidates: int = 100, samples: int = 1000, policy: str = "thompson",
-                 budget_draws: int = 800, batch: int = 2000, discount: float = 0.9,
+                 budget_draws: int = 500, batch: int = 2000, discount: float = 0.9,
                  quality: str = "force_closure", angular_noise_deg: float = 10.0,
                  shared_draws: float | None = None, prior_draws: float | None = None):
         if min(candidates, samples, budget_draws, batch) < 1:
