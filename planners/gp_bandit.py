@@ -13,8 +13,8 @@ from harness.grasp import Grasp
 from harness.quality import DrawPool, evaluate_pairs
 from planners import candidates as cand
 from harness.lift import MassBelief
-from planners.allocation import (POLICIES, PRIOR_DRAWS, PRIOR_POLICIES, SHARED_DRAWS, Arms, allocate, model_prior,
-                                 overlap_kernel)
+from planners.allocation import (DEFAULT_PRIOR_DRAWS, POLICIES, PRIOR_POLICIES, SHARED_DRAWS, Arms, allocate,
+                                 model_prior, overlap_kernel)
 from planners.base import Plan, Planner, Problem, Stopwatch, check_quality
 from planners.gp_gpis_opt import COM_SAMPLES, model_quality
 
@@ -56,7 +56,7 @@ class GPBandit(Planner):
                              f"(policy {policy!r}, shared_draws {shared_draws})")
         self.shared_draws = float(shared_draws)
         if prior_draws is None:  # Thompson sampling starts from the model by default; uniform is gp-p's
-            prior_draws = PRIOR_DRAWS if policy == "thompson" else 0.0
+            prior_draws = DEFAULT_PRIOR_DRAWS[self.quality] if policy == "thompson" else 0.0
         if prior_draws < 0 or (prior_draws > 0 and policy not in PRIOR_POLICIES):
             raise ValueError(f"prior_draws must be 0 or more, and 0 unless the policy is "
                              f"{' or '.join(PRIOR_POLICIES)} (policy {policy!r}, prior_draws {prior_draws})")

@@ -244,6 +244,8 @@ def test_capped_shared_evidence_still_finds_a_narrow_peak():
 
 def test_only_thompson_sampling_and_uniform_allocation_take_the_model_prior():
     assert GPBandit().prior_draws == PRIOR_DRAWS == 5.0
+    # The lift's model is too pessimistic to count as any draws (DEFAULT_PRIOR_DRAWS).
+    assert GPBandit(quality="lift").prior_draws == 0.0 and GPBandit(quality="lift", prior_draws=5).prior_draws == 5
     assert GPBandit(policy="uniform").prior_draws == 0.0 and GPBandit(policy="ucb").prior_draws == 0.0
     assert GPBandit(policy="uniform", prior_draws=5).prior_draws == 5.0
     for policy in ("gittins", "ucb", "pruning"):
