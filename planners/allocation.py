@@ -75,10 +75,11 @@ GITTINS_TOLERANCE = 1e-7
 
 @dataclass
 class Arms:
-    """The Beta-Bernoulli posterior of each of A arms: ``successes`` and ``pulls`` (A,), the sum of each arm's tie-break values over its pulls
-    (``tie``; a grasp's Ferrari-Canny quality), how many draws each arm may take at most
-    (``depth``: the pool's size) and which arms are still in play (``alive``: pruning
-    drops arms; every other policy keeps them all).
+    """The Beta-Bernoulli posterior of each of A arms: ``successes`` and ``pulls`` (A,),
+    the sum of each arm's tie-break values over its pulls (``tie``; a grasp's
+    Ferrari-Canny quality), how many draws each arm may take at most (``depth``: the
+    pool's size) and which arms are still in play (``alive``: pruning drops arms; every
+    other policy keeps them all).
 
     With ``neighbours`` (a sparse (A, A) matrix of overlaps in [0, 1], zero diagonal;
     :func:`overlap_kernel`) and ``shared_draws`` > 0, arm a's posterior also counts its

@@ -10,9 +10,9 @@ from __future__ import annotations
 import numpy as np
 
 from harness.grasp import Grasp
+from harness.lift import MassBelief
 from harness.quality import DrawPool, evaluate_pairs
 from planners import candidates as cand
-from harness.lift import MassBelief
 from planners.allocation import (DEFAULT_PRIOR_DRAWS, POLICIES, PRIOR_POLICIES, SHARED_DRAWS, Arms, allocate,
                                  model_prior, overlap_kernel)
 from planners.base import Plan, Planner, Problem, Stopwatch, check_quality

@@ -24,9 +24,9 @@ from harness.errors import InputError
 from harness.quality import default_streams, draw_evaluation, estimate_p_f
 from harness.scene import Scene, library_names, load_scene, parse_scene
 from harness.seeding import stream
+from planners.allocation import PRIOR_DRAWS
 from planners.base import Problem
 from planners.gp_bandit import GPBandit
-from planners.allocation import PRIOR_DRAWS
 from planners.gp_p import GPP
 from planners.registry import make_planner
 
