@@ -170,10 +170,10 @@ def model_run(model: np.ndarray, seed: int, budget: int, prior_draws: float = PR
 def test_a_good_model_prior_finds_the_best_arm_sooner_and_a_wrong_one_is_overcome():
     """A model that knows the means: the best arm leads from the first round (20 draws) to
     the end in at least 30 of 40 seeds (measured: 38), against at most 12 under the
-    uniform prior (measured: 4). A model that has them backwards (arm 0
-    at 0, the rest at 1) costs draws: the best arm is found within 3000 pulls in at most
-    20 of 40 seeds (measured: 10), but within 20,000 in at least 36 (measured: 40), since
-    the prior is worth only PRIOR_DRAWS of an arm's own draws."""
+    uniform prior (measured: 4). A model that has them backwards (arm 0 at 0, the rest at
+    1) costs draws: the best arm is found within 3000 pulls in at most 20 of 40 seeds
+    (measured: 10), but within 20,000 in at least 36 (measured: 40), since the prior is
+    worth only PRIOR_DRAWS of an arm's own draws."""
     def from_first_round(trace):
         return all(best == 0 for _, best in trace)
 
