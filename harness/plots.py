@@ -274,14 +274,18 @@ def bandit_figure(study: dict):
     """Like Laskey et al.'s convergence plots (from the bandit study of ``bench planning``
     or ``bench bandit``): against the draws spent, the P_F of each policy's best grasp so
     far as a fraction of the best candidate's (gp-p's choice), averaged over the study's
-    runs, and the share of runs within 1 % and 3 % of it."""
+    runs, and the share of runs within 1 % and 3 % of it. The axis of draws is linear up
+    to the first round (FIRST_ROUND) and logarithmic beyond, so that the answer before any
+    draw (0 draws) shows."""
+    from planners.allocation import FIRST_ROUND
+
     runs = [r for r in study.get("runs", []) if "skipped" not in r and r.get("target", 0) > 0]
     fig, axes = plt.subplots(1, 2, figsize=(11.0, 4.2), constrained_layout=True)
     policies = [p for p in POLICY_COLOURS if runs and all(p in r["curves"] for r in runs)]
     if policies:
-        first = min(r["curves"][p][0][0] for r in runs for p in policies)
+        first = min(d for r in runs for p in policies for d, _, _ in r["curves"][p] if d > 0)
         last = max(r["curves"][p][-1][0] for r in runs for p in policies)
-        grid = np.unique(np.geomspace(first, last, 300).round())
+        grid = np.unique(np.concatenate([[0.0], np.geomspace(first, max(last, first), 300).round()]))
         lowest = 1.0
         for policy in policies:
             fractions = np.empty((len(runs), len(grid)))
@@ -302,8 +306,9 @@ def bandit_figure(study: dict):
             axes[0].axhline(level, color="0.6", ls=style, lw=0.8)
         axes[0].set_ylim(max(0.0, lowest - 0.01), 1.005)
     for ax in axes:
-        ax.set_xscale("log")
-        ax.set_xlabel("draws spent (pulls)")
+        ax.set_xscale("symlog", linthresh=FIRST_ROUND, linscale=0.5)
+        ax.set_xlim(left=0.0)
+        ax.set_xlabel("draws spent (pulls; 0: before any draw)")
     axes[0].set_ylabel("P_F of the best grasp so far / best candidate's (mean)")
     axes[0].legend(fontsize=8, loc="lower right", title="policy", title_fontsize=8)
     axes[1].set_ylabel("share of runs within 1 % (solid), 3 % (dashed)")

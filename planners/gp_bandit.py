@@ -64,7 +64,9 @@ class GPBandit(Planner):
 
     def plan(self, problem: Problem, rng: np.random.Generator, record: list | None = None) -> Plan:
         """As Planner.plan; ``record`` (a list) receives (seconds, draws used, best grasp
-        (2, 2)) after every round, for convergence studies. Afterwards ``grasps_`` holds the
+        (2, 2)) before the first round (0 draws: the answer of the prior alone, the model's
+        best candidate, or gp-p's first one under the uniform prior) and after every round,
+        for convergence studies. Afterwards ``grasps_`` holds the
         candidates (G, 2, 2), ``arms_`` their posteriors and pulls
         (planners.allocation.Arms): where the draws went, and ``model_`` the model's P~_F
         (or P~_L) of each candidate (None without the model prior).
@@ -105,8 +107,10 @@ class GPBandit(Planner):
             prior = model_prior(model, self.prior_draws)
             clock.lap("model")
         neighbours = overlap_kernel(grasps, settings.sigma_g) if self.shared_draws > 0 else None
-        arms = allocate(pull, Arms.fresh(len(grasps), self.samples, neighbours, self.shared_draws, prior),
-                        self.policy, self.budget_draws, self.batch, policy_rng, self.discount, stop=clock.over_budget,
+        arms = Arms.fresh(len(grasps), self.samples, neighbours, self.shared_draws, prior)
+        if record is not None:
+            record.append((clock.elapsed(), 0, grasps[arms.best()].copy()))
+        arms = allocate(pull, arms, self.policy, self.budget_draws, self.batch, policy_rng, self.discount, stop=clock.over_budget,
                         after_round=after_round)
         self.grasps_, self.arms_, self.model_ = grasps, arms, model
         used = int(arms.pulls.sum())

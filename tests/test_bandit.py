@@ -18,7 +18,7 @@ from scipy import integrate, special, stats
 
 from harness.belief import build_belief
 from harness.errors import InputError
-from harness.quality import draw_evaluation, estimate_p_f
+from harness.quality import default_streams, draw_evaluation, estimate_p_f
 from harness.seeding import stream
 from harness.testing import check_planner
 from planners import candidates as cand
@@ -636,7 +636,15 @@ def test_a_tiny_study_measures_every_policy_and_draws_its_figure(tmp_path):
     pool_p_f = planner.arms_.successes / 60
     for tol, key in ((0.01, "1pct"), (0.03, "3pct")):
         assert runs[0]["share_within"][key] == np.mean(pool_p_f >= (1 - tol) * pool_p_f.max())
-    assert summary["ceiling"]["3pct"]["share_within"] == runs[0]["share_within"]["3pct"]
+    assert summary["candidates_within"]["3pct"] == runs[0]["share_within"]["3pct"]
+    # Every curve starts before any draw, from the answer of the prior alone: the model's
+    # best candidate under the model prior, gp-p's first candidate under the uniform one
+    # (a second path: that candidate judged here on the study's evaluation draws).
+    evaluation = draw_evaluation(belief, bandit_study.EVALUATION_DRAWS, *default_streams(0, "disk-bandit-evaluation"))
+    first = estimate_p_f(planner.grasps_[:1], evaluation, Problem.for_belief(belief).settings, lift=False)[0].p_f
+    for label, curve in runs[0]["curves"].items():
+        assert curve[0][0] == 0 and len(curve) > 1 and curve[1][0] > 0
+        assert curve[0][2] == (runs[0]["model_p_f"] if label in ("thompson", "uniform-model") else first), label
     # One library run: its group repeats the whole study's medians; no shared outline ran.
     assert list(summary["by_scenes"]) == ["library"] and summary["by_scenes"]["library"]["runs"] == 1
     for policy, row in summary["by_scenes"]["library"]["policies"].items():
@@ -691,25 +699,38 @@ def test_a_sensitivity_study_adds_thompson_sampling_with_each_shared_and_prior_d
     assert any(line.startswith("thompson-prior-0 ") for line in text.splitlines())
 
 
-def test_the_ceiling_is_uniforms_draws_over_the_first_round():
-    from harness.bench.bandit_study import _ceiling
+def test_draws_count_from_the_answer_before_any_draw():
+    """A policy whose answer is within the tolerance before any draw needs 0 draws: it is
+    infinitely faster than a uniform allocation that needs some, and as fast as one that
+    needs none. Three scenes: the policy is within from 0 draws on a and b, from 40 on c;
+    uniform from 100, 0 and 400."""
+    from harness.bench.bandit_study import _candidates_within, _of_medians, _ratio, reached, summarise
 
-    def curve(reach, last=1000):  # within 3 % from ``reach`` draws on, within 1 % never
-        return [(20, 0.02, 0.5)] + [(d, d / 1000, 0.98) for d in (reach, last) if d >= 20]
+    assert _ratio(100, 0) == math.inf and _ratio(0, 0) == 1.0 and _ratio(None, 0) == math.inf
+    assert _ratio(100, 40) == 2.5 and _ratio(100, None) == 0.0 and math.isnan(_ratio(None, None))
 
-    runs = [{"scene": scene, "curves": {"uniform": curve(d)}, "target": 1.0, "share_within": {"1pct": s1, "3pct": s3}}
-            for scene, d, s1, s3 in (("a", 40, 0.1, 0.2), ("b", 100, 0.0, 0.5), ("c", 400, 0.3, 0.4))]
-    ceiling = _ceiling(runs)
-    # 3 %: uniform's median 100 draws over the first round's 20; per run 2, 5 and 20. Three
-    # scenes resampled: the median is 40 (or 400) in 7 of 27 resamples, so the 95 %
-    # interval spans 2 to 20.
-    assert ceiling["3pct"] == {"of_medians": 5.0, "of_medians_ci95": [2.0, 20.0], "median_per_run": 5.0,
-                               "share_within": 0.4}
-    # 1 %: uniform never gets there, so nothing bounds the others' ratio.
-    assert ceiling["1pct"] == {"of_medians": None, "of_medians_ci95": [None, None], "median_per_run": None,
-                               "share_within": 0.1}
-    runs[0]["curves"]["uniform"] = curve(20)  # within from the first round: a ceiling of 1
-    assert _ceiling(runs[:1])["3pct"]["of_medians"] == 1.0
+    def curve(reach):  # within 3 % (not 1 %) from ``reach`` draws on, 0.5 of the target before
+        points = [(0, 0.01, 0.98 if reach == 0 else 0.5)] + [(d, d / 1000, 0.98) for d in (reach, 1000) if d > 0]
+        return points
+
+    assert reached(curve(0), 1.0, 0.03) == (0, 0.01) and reached(curve(40), 1.0, 0.03) == (40, 0.04)
+    timing = {"plan_s": {"uniform": 0.1, "policy": 0.1}, "gp_p_s": 1.0, "gp_p_draws": 1000,
+              "seconds": {"uniform": {"allocation": 0.05, "draws": 0.05}, "policy": {"allocation": 0.05, "draws": 0.05}}}
+    runs = [{"scene": scene, "seed": 0, "target": 1.0, "share_within": {"1pct": s1, "3pct": s3},
+             "curves": {"uniform": curve(u), "policy": curve(p)}, **timing}
+            for scene, u, p, s1, s3 in (("a", 100, 0, 0.1, 0.2), ("b", 0, 0, 0.0, 0.5), ("c", 400, 40, 0.3, 0.4))]
+    # Medians 100 over 0: infinite (None in JSON). Resampled, the policy's median is 40
+    # when c is drawn at least twice (7 of 27 resamples; uniform's is then 400: ratio 10),
+    # else 0, and uniform's is 0 when b is drawn at least twice (7 of 27: ratio 1, both
+    # from the start); the other 13 of 27 are infinite. So the interval is [1x, inf).
+    assert _of_medians(runs, "policy", 0.03) == {"value": None, "ci95": [1.0, None]}
+    assert _candidates_within(runs) == {"1pct": 0.1, "3pct": 0.4}
+    summary = summarise(runs, policies=["uniform", "policy"])
+    row = summary["policies"]["policy"]["3pct"]
+    # Per run: inf (a), 1 (b: both from 0 draws), 10 (c); the median is 10.
+    assert row["median_draws"] == 0.0 and row["median_uniform_over_policy_draws"] == 10.0
+    assert row["within_after"]["0"] == pytest.approx(2 / 3) and row["within_after"]["1000"] == 1.0
+    assert summary["policies"]["uniform"]["3pct"]["within_after"]["0"] == pytest.approx(1 / 3)
 
 
 def test_the_ratio_of_medians_has_a_scene_bootstrap_interval():

@@ -550,44 +550,37 @@ def _bandit_lines(res: dict) -> list[str]:
     seeds = f"seeds {first} to {first + res['seeds'] - 1}" if res["seeds"] > 1 else f"seed {first}"
     width = max([15] + [len(policy) + 2 for policy in summary["policies"]])
     scenes = f"{len(res['scenes'])} scene{'' if len(res['scenes']) == 1 else 's'}"
+    def times(v):  # a ratio; None: infinite (uniform never within, or the policy from 0 draws) or undefined
+        return "inf" if v is None else f"{v:.1f}x" if v >= 0.1 else f"{v:.2f}x"
+
     lines = [f"bandit study: {summary['runs']} runs ({scenes} x {seeds}, "
              f"{res.get('candidates', 100)} candidates each); the best "
-             f"grasp after every round judged on 1000 evaluation draws against gp-p's choice. Draws (and seconds) "
-             f"until it stays within 1 % / 3 %: median and 90th percentile over runs (never: not within the "
-             f"run's draws), the median of uniform's over the policy's per run, and the share of runs within "
-             f"after 1000 draws",
-             f"{'policy':<{width}}{'median':>14}{'p90':>16}{'seconds':>15}{'uniform/pol':>13}{'at 1000':>11}"
-             f"{'pull/draw':>10}{'judging':>9}{'plan s':>8}"]
+             f"grasp before any draw (0 draws) and after every round judged on 1000 evaluation draws against "
+             f"gp-p's choice. Draws (and seconds) until it stays within 1 % / 3 %: median and 90th percentile over "
+             f"runs (never: not within the run's draws), the median of uniform's over the policy's per run, and "
+             f"the share of runs within before any draw and after 1000 draws",
+             f"{'policy':<{width}}{'median':>14}{'p90':>16}{'seconds':>15}{'uniform/pol':>15}{'at 0':>11}"
+             f"{'at 1000':>11}{'pull/draw':>10}{'judging':>9}{'plan s':>8}"]
     for policy, row in summary["policies"].items():
         one, three = row["1pct"], row["3pct"]
 
         def pair(key, fmt, row1=one, row3=three):
             return f"{num(row1[key], fmt)} / {num(row3[key], fmt)}"
 
+        def share_at(budget, row1=one, row3=three):
+            return f"{row1['within_after'].get(budget, math.nan):.2f}/{row3['within_after'].get(budget, math.nan):.2f}"
+
+        ratios = f"{times(one['median_uniform_over_policy_draws'])} / {times(three['median_uniform_over_policy_draws'])}"
         lines.append(f"{policy:<{width}}{pair('median_draws', '.0f'):>14}{pair('p90_draws', '.0f'):>16}"
-                     f"{pair('median_seconds', '.3f'):>15}{pair('median_uniform_over_policy_draws', '.1f'):>13}"
-                     f"{one['within_after']['1000']:>7.2f}/{three['within_after']['1000']:.2f}"
+                     f"{pair('median_seconds', '.3f'):>15}{ratios:>15}{share_at('0'):>11}{share_at('1000'):>11}"
                      f"{num(row['pull_over_gp_p_draw'], '.2f'):>9}"
                      f"{num(row.get('judging_over_gp_p'), '.2f'):>9}{num(row['median_plan_s'], '.3f'):>8}")
-
-    def times(v):  # a ratio; None: infinite (uniform never within) or undefined
-        return "inf" if v is None else f"{v:.1f}x" if v >= 0.1 else f"{v:.2f}x"
 
     def interval(ci):
         return "[-]" if not ci else f"[{times(ci[0])}, {times(ci[1])}]"
 
-    def ceiling(c):
-        if not c:
-            return "not measured"
-
-        def bound(v):  # None: uniform never within, so nothing bounds the ratio
-            return "unbounded" if v is None else f"{v:.1f}x"
-
-        cells = [f"{bound(c[k]['of_medians'])} {interval(c[k].get('of_medians_ci95'))} "
-                 f"({bound(c[k]['median_per_run'])} per run; "
-                 f"{'n/a' if c[k]['share_within'] is None else format(c[k]['share_within'], '.2f')} "
-                 f"of the candidates within)" for k in ("3pct", "1pct")]
-        return " / ".join(cells)
+    def share(v):
+        return "n/a" if v is None else f"{v:.2f}"
 
     if all("uniform_over_policy_of_medians" in row["3pct"] for row in summary["policies"].values()):
         lines.append("uniform's median draws over the policy's, 3 % / 1 %, with 95 % intervals (the scenes "
@@ -601,19 +594,22 @@ def _bandit_lines(res: dict) -> list[str]:
         lines.append(f"the model alone (the candidate of highest P~_F, before any draw), {model['runs']} runs: P_F "
                      f"{model['mean_over_target']:.3f} of the target on average; within 1 % / 3 % in "
                      f"{model['within']['1pct']:.2f} / {model['within']['3pct']:.2f} of the runs")
-    lines.append(f"ceiling at 3 % / 1 %, the most any allocation could beat uniform by (uniform's median draws over "
-                 f"the first round's, [95 % interval]): {ceiling(summary.get('ceiling'))}")
+    within = summary.get("candidates_within") or {}
+    lines.append(f"candidates within 3 % / 1 % of the best, by gp-p's estimates (median share over runs): "
+                 f"{share(within.get('3pct'))} / {share(within.get('1pct'))}; draws are counted from the answer "
+                 f"before any draw (0 draws), so inf is also a policy within from the start while uniform is not")
     for group, part in summary.get("by_scenes", {}).items():
+        within = part.get("candidates_within") or {}
         lines.append(f"{group} ({part['runs']} runs), draws to 3 % / 1 %, median, against uniform's "
-                     f"(uniform's median over the policy's [95 % interval]; the median per-run ratio); ceiling "
-                     f"{ceiling(part.get('ceiling'))}:")
+                     f"(uniform's median over the policy's [95 % interval]; the median per-run ratio); candidates "
+                     f"within {share(within.get('3pct'))} / {share(within.get('1pct'))}:")
         for policy, row in part["policies"].items():
             cells = []
             for key in ("3pct", "1pct"):
                 c = row[key]
                 mine, theirs = c["median_draws"], c["uniform_median_draws"]
-                ratio = None if mine is None or theirs is None else theirs / mine
-                over = "-" if ratio is None else times(ratio)
+                over = "-" if mine is None or theirs is None else \
+                    times(theirs / mine if mine else 1.0 if theirs == 0 else None)
                 ci = " " + interval(c["uniform_over_policy_of_medians"]["ci95"]) \
                     if "uniform_over_policy_of_medians" in c else ""
                 cells.append(f"{num(mine, '.0f')} vs {num(theirs, '.0f')} ({over}{ci}; "

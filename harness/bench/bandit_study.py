@@ -5,7 +5,8 @@ like Laskey et al. (CASE 2015), over the library scenes and the shared outlines.
 
 One run is one scene and seed: one belief, the planners' stream shared by gp-p and every
 policy (so all judge the same candidates on the same pool of draws), and 1000 evaluation
-draws of the study's own, on which the best grasp after every round is judged. The target
+draws of the study's own, on which the best grasp before any draw (the answer of the
+prior alone) and after every round is judged. The target
 is the P_F of gp-p's choice (every candidate on all its draws), which uniform allocation
 reaches exactly when its budget covers every candidate's draws.
 """
@@ -57,8 +58,9 @@ PRIOR_PREFIX = "thompson-prior-"
 #: Resamples of the scenes behind the 95 % intervals of the ratios of medians (a cluster
 #: bootstrap: a scene's seeds stay together, as they share its outline and sensor).
 BOOTSTRAP = 2000
-#: Draws after which the study reports the share of runs within each tolerance.
-ANYTIME_BUDGETS = (250, 500, 1000, 2000, 5000)
+#: Draws after which the study reports the share of runs within each tolerance (0: the
+#: answer before any draw).
+ANYTIME_BUDGETS = (0, 20, 250, 500, 1000, 2000, 5000)
 EVALUATION_DRAWS = 1000
 #: Budget (draws) of the adaptive policies; uniform and pruning may spend every
 #: candidate's draws (uniform then makes gp-p's choice).
@@ -121,8 +123,8 @@ def run(name: str, seed: int, candidates: int = CANDIDATES, samples: int = 1000,
         batch: int | None = None, policies=None, defaults: bool = True, shared_draws=(), prior_draws=()) -> dict:
     """One run: every allocation's curve (``policies``: labels of :func:`allocations` of
     ``shared_draws`` and ``prior_draws``, by default all of them; draws, seconds, P_F of
-    its best grasp so far on the evaluation draws, kept at the first round, the rounds
-    where that P_F changes and the last), gp-p's plan time and choice, the target, the P_F
+    its best grasp so far on the evaluation draws, kept before the first round (0 draws),
+    at the rounds where that P_F changes and at the last), gp-p's plan time and choice, the target, the P_F
     of the model's best candidate (``model_p_f``: the answer before any draw, from the
     first allocation with the model prior), and (``defaults``) the default planners' plan
     times and P_F."""
@@ -224,10 +226,10 @@ def summarise(runs: list[dict], policies=None) -> dict:
     and the share of runs within it after each of ANYTIME_BUDGETS draws (a budgeted
     planner's view). Per policy also its seconds per pull over gp-p's per draw, with the
     shape samples (``pull_over_gp_p_draw``) and without them (``judging_over_gp_p``, see
-    :func:`_judging`), and its median plan time. ``ceiling``: the largest ratio to uniform
-    that any allocation could show, and how many candidates are within each tolerance
-    (see :func:`_ceiling`). ``by_scenes``: the draws to each tolerance on the library
-    scenes and on the shared outlines apart, with their ceilings (see :func:`_by_scenes`).
+    :func:`_judging`), and its median plan time. ``candidates_within``: how many
+    candidates are within each tolerance (see :func:`_candidates_within`). ``by_scenes``:
+    the draws to each tolerance on the library scenes and on the shared outlines apart
+    (see :func:`_by_scenes`).
     ``model``: the model's best candidate, before any draw (see :func:`_model`). Plus the
     default planners' plan times and P_F on the library scenes (``make eval``'s).
     ``policies``: the labels summarised, by default ALLOCATIONS' and then any other label
@@ -261,7 +263,7 @@ def summarise(runs: list[dict], policies=None) -> dict:
         defaults[name] = {"median_plan_s": _quantile([d["plan_s"] for d in rows], 0.5),
                           "mean_plan_s": float(np.mean([d["plan_s"] for d in rows])) if rows else None,
                           "mean_p_f": float(np.mean([d["p_f"] for d in rows])) if rows else None, "runs": len(rows)}
-    return {"policies": table, "model": _model(runs), "ceiling": _ceiling(runs),
+    return {"policies": table, "model": _model(runs), "candidates_within": _candidates_within(runs),
             "by_scenes": _by_scenes(runs, list(table)),
             "median_gp_p_s": _quantile([r["gp_p_s"] for r in runs], 0.5),
             "uniform_is_gp_p": sum(bool(r.get("uniform_is_gp_p")) for r in runs), "runs": len(runs),
@@ -333,7 +335,8 @@ def _by_scenes(runs: list[dict], policies: list[str]) -> dict:
     """For the library scenes and the shared outlines apart (a group without runs is
     left out): per policy and tolerance, the median draws to reach it, uniform's median,
     the median over runs of uniform's draws over the policy's, and uniform's median over
-    the policy's with its 95 % interval (:func:`_of_medians`)."""
+    the policy's with its 95 % interval (:func:`_of_medians`); and the share of
+    candidates within each tolerance (:func:`_candidates_within`)."""
     library = set(library_names())
     groups = {"library": [r for r in runs if r["scene"] in library],
               "shared outlines": [r for r in runs if r["scene"] not in library]}
@@ -351,35 +354,17 @@ def _by_scenes(runs: list[dict], policies: list[str]) -> dict:
                     "median_draws": _quantile(draws, 0.5), "uniform_median_draws": uniform[tol],
                     "median_uniform_over_policy_draws": _quantile(ratio_d, 0.5),
                     "uniform_over_policy_of_medians": _of_medians(members, policy, tol)}
-        out[group] = {"runs": len(members), "policies": rows, "ceiling": _ceiling(members)}
+        out[group] = {"runs": len(members), "policies": rows, "candidates_within": _candidates_within(members)}
     return out
 
 
-def _ceiling(runs: list[dict]) -> dict:
-    """What no allocation could beat, per tolerance. The study's policies share one round
-    schedule, and a curve starts after its first round (planners.allocation.FIRST_ROUND
-    pulls: uniform's first point), so no policy reaches a tolerance in fewer draws.
-    Uniform's draws over the first round's then bound uniform's median over a policy's
-    (``of_medians``, with its 95 % interval over resampled scenes, ``of_medians_ci95``, see
-    :func:`_of_medians`) and the median per-run ratio (``median_per_run``). Also the median
-    over runs of the share of candidates whose P_F on the planners' pool is within the
-    tolerance of the best one's (``share_within``: how many candidates are nearly as good
-    as gp-p's choice; the more, the less any allocation can gain). A bound is None where
-    uniform never reached the tolerance; the dict is empty when uniform did not run."""
-    runs = [r for r in runs if "uniform" in r["curves"]]
-    if not runs:
-        return {}
-    first = [r["curves"]["uniform"][0][0] for r in runs]
-    out = {}
-    for tol in TOLERANCES:
-        key = f"{round(tol * 100)}pct"
-        uniform = _reaching(runs, "uniform", tol)[0]
-        draws, rounds = np.array(uniform), np.array(first, dtype=float)
-        bound = _bootstrapped(runs, lambda idx: np.median(draws[idx]) / np.median(rounds[idx]))
-        out[key] = {"of_medians": bound["value"], "of_medians_ci95": bound["ci95"],
-                    "median_per_run": _quantile([u / f for u, f in zip(uniform, first)], 0.5),
-                    "share_within": _quantile([r["share_within"][key] for r in runs if "share_within" in r], 0.5)}
-    return out
+def _candidates_within(runs: list[dict]) -> dict:
+    """Per tolerance, the median over runs of the share of candidates whose P_F on the
+    planners' pool is within it of the best one's: how many candidates are nearly as
+    good as gp-p's choice (the more, the sooner even uniform allocation meets one, and
+    the less any allocation can gain). None without runs that hold it."""
+    return {f"{round(tol * 100)}pct": _quantile([r["share_within"][f"{round(tol * 100)}pct"]
+                                                  for r in runs if "share_within" in r], 0.5) for tol in TOLERANCES}
 
 
 def _judging(run: dict, policy: str) -> float:
@@ -396,7 +381,8 @@ def _judging(run: dict, policy: str) -> float:
 
 def at_draws(curve: list, draws: int) -> float:
     """The P_F of the best grasp after the last round that ended within ``draws`` draws
-    (0 before the first round)."""
+    (the answer before any draw, at 0 draws, if the curve holds it; else 0 before its
+    first point)."""
     value = 0.0
     for d, _, p in curve:
         if d > draws:
@@ -406,10 +392,16 @@ def at_draws(curve: list, draws: int) -> float:
 
 
 def _ratio(uniform, policy) -> float:
-    """uniform / policy, where None (never reached) is infinitely many."""
+    """uniform / policy, where None (never reached) is infinitely many; a policy that
+    needs no draw (within before any) is infinitely faster than a uniform that needs
+    some, and as fast as one that needs none (1)."""
     if policy is None:
         return 0.0 if uniform is not None else math.nan
-    return math.inf if uniform is None else uniform / policy
+    if uniform is None:
+        return math.inf
+    if policy == 0:
+        return 1.0 if uniform == 0 else math.inf
+    return uniform / policy
 
 
 def _quantile(values, q: float) -> float | None:
