@@ -286,7 +286,7 @@ def bandit_figure(study: dict):
         first = min(d for r in runs for p in policies for d, _, _ in r["curves"][p] if d > 0)
         last = max(r["curves"][p][-1][0] for r in runs for p in policies)
         grid = np.unique(np.concatenate([[0.0], np.geomspace(first, max(last, first), 300).round()]))
-        lowest = 1.0
+        lowest, below = 1.0, {}
         for policy in policies:
             fractions = np.empty((len(runs), len(grid)))
             for k, r in enumerate(runs):
@@ -297,14 +297,23 @@ def bandit_figure(study: dict):
             started = np.isfinite(fractions).all(axis=0)  # once every run has an answer
             colour = POLICY_COLOURS[policy]
             mean = fractions[:, started].mean(axis=0)
-            lowest = min(lowest, float(mean.min()))
+            # The axis is scaled to the rounds; an answer before any draw far below them is
+            # named in the panel instead of stretching it.
+            lowest = min(lowest, float(mean[grid[started] > 0].min()))
+            if grid[started][0] == 0:
+                below[policy] = float(mean[0])
             axes[0].step(grid[started], mean, where="post", color=colour, label=policy)
             for tol, style in ((0.01, "-"), (0.03, "--")):
                 share = (fractions[:, started] >= 1.0 - tol).mean(axis=0)
                 axes[1].step(grid[started], share, where="post", color=colour, ls=style)
         for level, style in ((0.99, "-"), (0.97, "--")):
             axes[0].axhline(level, color="0.6", ls=style, lw=0.8)
-        axes[0].set_ylim(max(0.0, lowest - 0.01), 1.005)
+        floor = max(0.0, lowest - 0.01)
+        axes[0].set_ylim(floor, 1.005)
+        off = {policy: v for policy, v in below.items() if v < floor}
+        if off:  # the policies under the uniform prior all answer gp-p's first candidate
+            values = " or ".join(sorted({f"{v:.2f}" for v in off.values()}))
+            axes[0].set_title(f"before any draw, below the axis: {len(off)} policies at {values}", fontsize=8)
     for ax in axes:
         ax.set_xscale("symlog", linthresh=FIRST_ROUND, linscale=0.5)
         ax.set_xlim(left=0.0)
