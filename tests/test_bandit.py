@@ -731,6 +731,12 @@ def test_draws_count_from_the_answer_before_any_draw():
     assert row["median_draws"] == 0.0 and row["median_uniform_over_policy_draws"] == 10.0
     assert row["within_after"]["0"] == pytest.approx(2 / 3) and row["within_after"]["1000"] == 1.0
     assert summary["policies"]["uniform"]["3pct"]["within_after"]["0"] == pytest.approx(1 / 3)
+    # What bench bandit prints of it: the three scenes are outlines, not library scenes.
+    from harness import bench
+
+    text = bench.format_results({"seeds": 1, "first_seed": 0, "scenes": ["a", "b", "c"], "candidates": 2,
+                                 "summary": summary})
+    assert "policy 0 vs 100 (inf [1.0x, inf]; 10.0x)" in " ".join(text.split())
 
 
 def test_the_ratio_of_medians_has_a_scene_bootstrap_interval():

@@ -236,9 +236,9 @@ def _bandit_scenes(scenes) -> list[str]:
 def bandit(seeds: int | None = None, scenes=None, candidates: int | None = None, first_seed: int = 0,
            shared_draws=(), prior_draws=()) -> dict:
     """The bandit convergence study (harness/bench/bandit_study.py): per scene (one process
-    each) and seed, every gp-bandit policy's best grasp after every round judged on 1000
-    evaluation draws against gp-p's choice; the draws and seconds to within 1 % and 3 %,
-    and the default planners' plan times. ``seeds`` (default 3; 0 skips the study),
+    each) and seed, every gp-bandit policy's best grasp before any draw and after every
+    round judged on 1000 evaluation draws against gp-p's choice; the draws (from 0) and
+    seconds to within 1 % and 3 %, and the default planners' plan times. ``seeds`` (default 3; 0 skips the study),
     ``scenes`` (default: the library and the shared outlines) and ``candidates`` (the arms
     of every run; default 100, gp-p's) set its size; the seeds are first_seed, first_seed
     + 1, ... (another first seed gives held-out runs). ``shared_draws`` and
@@ -596,8 +596,9 @@ def _bandit_lines(res: dict) -> list[str]:
                      f"{model['within']['1pct']:.2f} / {model['within']['3pct']:.2f} of the runs")
     within = summary.get("candidates_within") or {}
     lines.append(f"candidates within 3 % / 1 % of the best, by gp-p's estimates (median share over runs): "
-                 f"{share(within.get('3pct'))} / {share(within.get('1pct'))}; draws are counted from the answer "
-                 f"before any draw (0 draws), so inf is also a policy within from the start while uniform is not")
+                 f"{share(within.get('3pct'))} / {share(within.get('1pct'))}. Draws count from 0, the answer "
+                 f"before any draw; a ratio is inf where uniform never gets within, or where the policy is within "
+                 f"from 0 draws and uniform is not")
     for group, part in summary.get("by_scenes", {}).items():
         within = part.get("candidates_within") or {}
         lines.append(f"{group} ({part['runs']} runs), draws to 3 % / 1 %, median, against uniform's "
@@ -613,7 +614,7 @@ def _bandit_lines(res: dict) -> list[str]:
                 ci = " " + interval(c["uniform_over_policy_of_medians"]["ci95"]) \
                     if "uniform_over_policy_of_medians" in c else ""
                 cells.append(f"{num(mine, '.0f')} vs {num(theirs, '.0f')} ({over}{ci}; "
-                             f"{num(c['median_uniform_over_policy_draws'], '.1f')}x)")
+                             f"{times(c['median_uniform_over_policy_draws'])})")
             lines.append(f"  {policy:<{width}}" + " / ".join(cells))
     lines.append(f"uniform made gp-p's choice in {summary['uniform_is_gp_p']} of {summary['runs']} runs; "
                  f"pull/draw: seconds per pull over gp-p's per draw, shape samples included; judging: "
