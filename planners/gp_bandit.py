@@ -66,10 +66,10 @@ class GPBandit(Planner):
         """As Planner.plan; ``record`` (a list) receives (seconds, draws used, best grasp
         (2, 2)) before the first round (0 draws: the answer of the prior alone, the model's
         best candidate, or gp-p's first one under the uniform prior) and after every round,
-        for convergence studies. Afterwards ``grasps_`` holds the
-        candidates (G, 2, 2), ``arms_`` their posteriors and pulls
-        (planners.allocation.Arms): where the draws went, and ``model_`` the model's P~_F
-        (or P~_L) of each candidate (None without the model prior).
+        for convergence studies. Afterwards ``grasps_`` holds the candidates (G, 2, 2),
+        ``arms_`` their posteriors and pulls (planners.allocation.Arms): where the draws
+        went, and ``model_`` the model's P~_F (or P~_L) of each candidate (None without the
+        model prior).
 
         The generator is used as gp-p uses it (candidates, then the pool's four streams),
         then once more for the policy's own stream (and, for the model prior of the lift
@@ -110,8 +110,8 @@ class GPBandit(Planner):
         arms = Arms.fresh(len(grasps), self.samples, neighbours, self.shared_draws, prior)
         if record is not None:
             record.append((clock.elapsed(), 0, grasps[arms.best()].copy()))
-        arms = allocate(pull, arms, self.policy, self.budget_draws, self.batch, policy_rng, self.discount, stop=clock.over_budget,
-                        after_round=after_round)
+        arms = allocate(pull, arms, self.policy, self.budget_draws, self.batch, policy_rng, self.discount,
+                        stop=clock.over_budget, after_round=after_round)
         self.grasps_, self.arms_, self.model_ = grasps, arms, model
         used = int(arms.pulls.sum())
         clock.lap("allocation")

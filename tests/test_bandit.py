@@ -714,8 +714,9 @@ def test_draws_count_from_the_answer_before_any_draw():
         return points
 
     assert reached(curve(0), 1.0, 0.03) == (0, 0.01) and reached(curve(40), 1.0, 0.03) == (40, 0.04)
+    seconds = {"allocation": 0.05, "draws": 0.05}
     timing = {"plan_s": {"uniform": 0.1, "policy": 0.1}, "gp_p_s": 1.0, "gp_p_draws": 1000,
-              "seconds": {"uniform": {"allocation": 0.05, "draws": 0.05}, "policy": {"allocation": 0.05, "draws": 0.05}}}
+              "seconds": {"uniform": seconds, "policy": seconds}}
     runs = [{"scene": scene, "seed": 0, "target": 1.0, "share_within": {"1pct": s1, "3pct": s3},
              "curves": {"uniform": curve(u), "policy": curve(p)}, **timing}
             for scene, u, p, s1, s3 in (("a", 100, 0, 0.1, 0.2), ("b", 0, 0, 0.0, 0.5), ("c", 400, 40, 0.3, 0.4))]

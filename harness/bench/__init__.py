@@ -238,12 +238,13 @@ def bandit(seeds: int | None = None, scenes=None, candidates: int | None = None,
     """The bandit convergence study (harness/bench/bandit_study.py): per scene (one process
     each) and seed, every gp-bandit policy's best grasp before any draw and after every
     round judged on 1000 evaluation draws against gp-p's choice; the draws (from 0) and
-    seconds to within 1 % and 3 %, and the default planners' plan times. ``seeds`` (default 3; 0 skips the study),
-    ``scenes`` (default: the library and the shared outlines) and ``candidates`` (the arms
-    of every run; default 100, gp-p's) set its size; the seeds are first_seed, first_seed
-    + 1, ... (another first seed gives held-out runs). ``shared_draws`` and
-    ``prior_draws`` add Thompson sampling with each of these values of shared evidence
-    and of the model prior's weight (sensitivity studies)."""
+    seconds to within 1 % and 3 %, and the default planners' plan times. ``seeds``
+    (default 3; 0 skips the study), ``scenes`` (default: the library and the shared
+    outlines) and ``candidates`` (the arms of every run; default 100, gp-p's) set its
+    size; the seeds are first_seed, first_seed + 1, ... (another first seed gives
+    held-out runs). ``shared_draws`` and ``prior_draws`` add Thompson sampling with each
+    of these values of shared evidence and of the model prior's weight (sensitivity
+    studies)."""
     from harness.bench import bandit_study
 
     seeds = bandit_study.SEEDS if seeds is None else seeds
@@ -550,6 +551,7 @@ def _bandit_lines(res: dict) -> list[str]:
     seeds = f"seeds {first} to {first + res['seeds'] - 1}" if res["seeds"] > 1 else f"seed {first}"
     width = max([15] + [len(policy) + 2 for policy in summary["policies"]])
     scenes = f"{len(res['scenes'])} scene{'' if len(res['scenes']) == 1 else 's'}"
+
     def times(v):  # a ratio; None: infinite (uniform never within, or the policy from 0 draws) or undefined
         return "inf" if v is None else f"{v:.1f}x" if v >= 0.1 else f"{v:.2f}x"
 
@@ -570,7 +572,7 @@ def _bandit_lines(res: dict) -> list[str]:
         def share_at(budget, row1=one, row3=three):
             return f"{row1['within_after'].get(budget, math.nan):.2f}/{row3['within_after'].get(budget, math.nan):.2f}"
 
-        ratios = f"{times(one['median_uniform_over_policy_draws'])} / {times(three['median_uniform_over_policy_draws'])}"
+        ratios = " / ".join(times(r["median_uniform_over_policy_draws"]) for r in (one, three))
         lines.append(f"{policy:<{width}}{pair('median_draws', '.0f'):>14}{pair('p90_draws', '.0f'):>16}"
                      f"{pair('median_seconds', '.3f'):>15}{ratios:>15}{share_at('0'):>11}{share_at('1000'):>11}"
                      f"{num(row['pull_over_gp_p_draw'], '.2f'):>9}"

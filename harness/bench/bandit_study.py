@@ -6,9 +6,9 @@ like Laskey et al. (CASE 2015), over the library scenes and the shared outlines.
 One run is one scene and seed: one belief, the planners' stream shared by gp-p and every
 policy (so all judge the same candidates on the same pool of draws), and 1000 evaluation
 draws of the study's own, on which the best grasp before any draw (the answer of the
-prior alone) and after every round is judged. The target
-is the P_F of gp-p's choice (every candidate on all its draws), which uniform allocation
-reaches exactly when its budget covers every candidate's draws.
+prior alone) and after every round is judged. The target is the P_F of gp-p's choice
+(every candidate on all its draws), which uniform allocation reaches exactly when its
+budget covers every candidate's draws.
 """
 
 from __future__ import annotations
@@ -124,10 +124,10 @@ def run(name: str, seed: int, candidates: int = CANDIDATES, samples: int = 1000,
     """One run: every allocation's curve (``policies``: labels of :func:`allocations` of
     ``shared_draws`` and ``prior_draws``, by default all of them; draws, seconds, P_F of
     its best grasp so far on the evaluation draws, kept before the first round (0 draws),
-    at the rounds where that P_F changes and at the last), gp-p's plan time and choice, the target, the P_F
-    of the model's best candidate (``model_p_f``: the answer before any draw, from the
-    first allocation with the model prior), and (``defaults``) the default planners' plan
-    times and P_F."""
+    at the rounds where that P_F changes and at the last), gp-p's plan time and choice,
+    the target, the P_F of the model's best candidate (``model_p_f``: the answer before
+    any draw, from the first allocation with the model prior), and (``defaults``) the
+    default planners' plan times and P_F."""
     scene = scene_of(name)
     belief = build_belief(scene, stream(seed, scene.name, 0, "sensor")).prepare()
     problem = Problem.for_belief(belief)
