@@ -209,6 +209,25 @@ def test_the_model_ranks_gp_ps_candidates_as_their_draws_do(beliefs):
         np.testing.assert_array_equal(informed.model_, model)  # the same candidates, the same model
 
 
+def test_a_time_budget_spent_before_the_first_round_answers_the_models_best(beliefs):
+    """Anytime to the end: with no time left for a round, gp-bandit spends no draw and
+    answers the candidate the model rates highest (under the uniform prior, the first
+    candidate), with status "budget"; ``record`` holds that answer at 0 draws. A second
+    path: the same candidates and model from a plan with time to spare."""
+    problem = Problem.for_belief(beliefs("marker"))
+    spare = GPBandit(budget_draws=100)
+    spare.plan(problem, stream(3, "marker", "anytime"))
+    for policy, expected in (("thompson", spare.grasps_[np.argmax(spare.model_)]), ("ucb", spare.grasps_[0])):
+        record: list = []
+        plan = GPBandit(policy=policy).plan(Problem.for_belief(beliefs("marker"), time_budget_s=1e-9),
+                                            stream(3, "marker", "anytime"), record=record)
+        assert plan.status == "budget" and plan.evaluations == 0 and plan.iterations == 0, policy
+        np.testing.assert_array_equal(plan.grasp.array, expected)
+        assert len(record) == 1 and record[0][1] == 0
+        np.testing.assert_array_equal(record[0][2], expected)
+    assert not np.array_equal(spare.grasps_[np.argmax(spare.model_)], spare.grasps_[0])  # the two differ here
+
+
 def narrow_peak(shared_draws: float, seed: int) -> Arms:
     """Arm 0 (p = 0.9) overlaps eight neighbours of p = 0.5 by 0.9 each; arms 9 to 13
     (p = 0.8) overlap one another by 0.9. Thompson sampling, 6000 pulls."""
