@@ -540,6 +540,8 @@ def format_results(results: dict) -> str:
 
 
 def _bandit_lines(res: dict) -> list[str]:
+    from harness.bench import bandit_study
+
     summary = res.get("summary")
     if not summary:
         return ["bandit study: skipped (no seeds or no scenes)"]
@@ -611,8 +613,8 @@ def _bandit_lines(res: dict) -> list[str]:
             for key in ("3pct", "1pct"):
                 c = row[key]
                 mine, theirs = c["median_draws"], c["uniform_median_draws"]
-                over = "-" if mine is None or theirs is None else \
-                    times(theirs / mine if mine else 1.0 if theirs == 0 else None)
+                ratio = math.nan if mine is None or theirs is None else bandit_study._ratio(theirs, mine)
+                over = "-" if math.isnan(ratio) else times(ratio if math.isfinite(ratio) else None)
                 ci = " " + interval(c["uniform_over_policy_of_medians"]["ci95"]) \
                     if "uniform_over_policy_of_medians" in c else ""
                 cells.append(f"{num(mine, '.0f')} vs {num(theirs, '.0f')} ({over}{ci}; "
