@@ -87,8 +87,15 @@ def test_pairs_of_grasps_and_draws_are_judged_as_on_the_full_grid(rectangle):
 def test_a_draw_pool_holds_the_same_draws_as_draw_evaluation(rectangle):
     """On the rectangle, 250 draws come block by block (the weight-space sampler) and 120
     at once (pathwise, whose stream depends on the split): either way the pool's draws are
-    draw_evaluation's, bit for bit, and only the blocks asked for are drawn."""
+    draw_evaluation's, and only the blocks asked for are drawn. Pathwise draws are the
+    same bit for bit. Weight-space draws solve for a block's deviations in single
+    precision in one product, whose rounding can depend on how many draws it holds under
+    some BLAS kernels (OpenBLAS's Haswell kernels on this project's machine: up to 5e-9 m
+    from draw 96 on): they agree to 1e-4 of the posterior's largest std, the bound the
+    sampler's single precision keeps (test_gpis.py), and their regions to 1e-6 of the grid."""
     belief, _ = rectangle
+    value_std = float(np.sqrt(belief.var.max()))
+    gradient_std = float(np.sqrt(belief.gradient_var.max()))
     for n, sampler in ((250, "weight-space"), (120, "pathwise")):
         assert belief.sampler(n) == sampler
         whole = draw_evaluation(belief, n, *default_streams(3, "rectangle"))
@@ -97,11 +104,15 @@ def test_a_draw_pool_holds_the_same_draws_as_draw_evaluation(rectangle):
         assert len(first) == (POOL_BLOCK if sampler == "weight-space" else n) and pool.drawn == len(first)
         full = pool.draws(n)
         assert len(full) == n and len(pool.draws(1)) == n
-        for name in ("values", "gx", "gy", "twist"):
-            np.testing.assert_array_equal(getattr(full.shapes, name), getattr(whole.shapes, name), err_msg=name)
-        for name in ("area", "center_of_mass", "hull"):
-            np.testing.assert_array_equal(getattr(full.shapes.regions, name), getattr(whole.shapes.regions, name),
-                                          err_msg=name)
+        exact = sampler == "pathwise"
+        for name, std in (("values", value_std), ("gx", gradient_std), ("gy", gradient_std),
+                          ("twist", gradient_std / belief.grid.cell)):
+            np.testing.assert_allclose(getattr(full.shapes, name), getattr(whole.shapes, name), rtol=0,
+                                       atol=0 if exact else 1e-4 * std, err_msg=name)
+        for name, scale in (("area", belief.grid.extent**2), ("center_of_mass", belief.grid.extent),
+                            ("hull", belief.grid.extent)):
+            np.testing.assert_allclose(getattr(full.shapes.regions, name), getattr(whole.shapes.regions, name),
+                                       rtol=0, atol=0 if exact else 1e-6 * scale, err_msg=name)
         for name in ("approach", "friction", "pressure"):
             np.testing.assert_array_equal(getattr(full, name), getattr(whole, name), err_msg=name)
         assert full.torque_scale == whole.torque_scale
