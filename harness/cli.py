@@ -51,6 +51,7 @@ def _checked(convert, accept, expected: str):
 _seed = _checked(int, lambda v: v >= 0, "a non-negative integer seed")
 _positive_int = _checked(int, lambda v: 1 <= v <= 1_000_000, "an integer from 1 to 1000000")
 _non_negative = _checked(float, lambda v: math.isfinite(v) and v >= 0, "a finite number >= 0")
+_positive_number = _checked(float, lambda v: math.isfinite(v) and v > 0, "a finite number > 0")
 _coordinate = _checked(float, math.isfinite, "a finite coordinate in metres")
 _sizes = _checked(lambda t: [int(v) for v in t.split(",")], lambda v: len(v) > 0,
                   "comma-separated integers like 25,40,55")
@@ -138,14 +139,13 @@ def _scene_and_grasp(args):
 
 
 def _quality(args) -> int:
-    from harness.belief import build_belief
-    from harness.quality import default_streams, draw_evaluation, estimate_p_f
-    from harness.seeding import stream
+    from harness import pipeline
+    from harness.memory import check_single
 
     scene, grasp, settings = _scene_and_grasp(args)
-    belief = build_belief(scene, stream(args.seed, scene.name, 0, "sensor"))
-    draws = draw_evaluation(belief, args.samples, *default_streams(args.seed, scene.name))
-    est = estimate_p_f(grasp, draws, settings)[0]
+    check_single(scene, args.seed, args.samples, field="--samples")
+    cell = pipeline.open_cell(scene, settings, args.seed, 0, args.samples)
+    est = pipeline.judge(cell, grasp, args.samples).estimates[0]
     if args.json:
         out = est.as_dict() | {"scene": scene.name, "grasp": {"g1": list(grasp.g1), "g2": list(grasp.g2)},
                                "sigma_g": settings.sigma_g, "friction": settings.friction,
@@ -165,23 +165,22 @@ def _quality(args) -> int:
 def _simulate(args) -> int:
     from tqdm import tqdm
 
-    from harness.belief import build_belief
-    from harness.physics.simulate import SimulationSummary, make_trials, sample_polygons, truth_polygon
+    from harness import pipeline
+    from harness.memory import check_single
+    from harness.physics.simulate import SimulationSummary, make_trials
     from harness.physics.trial import Runner
-    from harness.quality import default_streams
-    from harness.seeding import stream
 
     scene, grasp, settings = _scene_and_grasp(args)
     if args.frames is not None and Path(args.frames).exists() and not Path(args.frames).is_dir():
         raise InputError("--frames", None, f"{args.frames} exists and is not a folder")
-    shapes_rng, approach_rng, friction_rng, _ = default_streams(args.seed, scene.name)
     if args.shapes == "posterior":
-        belief = build_belief(scene, stream(args.seed, scene.name, 0, "sensor"))
-        polygons = sample_polygons(belief, args.trials, shapes_rng)
+        # As many draws as eval's default analytic draws: trial i is eval's posterior trial i.
+        draws = max(pipeline.DRAWS, args.trials)
+        check_single(scene, args.seed, draws, field="--trials")
+        inputs = pipeline.posterior_inputs(pipeline.open_cell(scene, settings, args.seed, 0, draws), args.trials)
     else:
-        polygons = [truth_polygon(scene)]
-    approach = approach_rng.standard_normal((args.trials, 2, 2))
-    trials = make_trials(settings, grasp, polygons, approach, friction_rng.standard_normal(args.trials))
+        inputs = pipeline.truth_inputs(scene, args.seed, 0, args.trials)
+    trials = make_trials(settings, grasp, inputs.polygons, inputs.approach, inputs.friction)
     start = time.perf_counter()
     with Runner() as runner, tqdm(total=len(trials), unit="trial", disable=None, file=sys.stderr) as bar:
         results = runner.run(trials, frames=Path(args.frames) if args.frames else None, progress=bar.update)
@@ -207,10 +206,15 @@ def _eval(args) -> int:
     from harness.config import load_config
     from harness.executor import check_scheduler
     from harness.experiment import run_experiment
+    from harness.memory import check_config
     from harness.outputs import command_line, folder_lock, output_folder, storage
 
     config = load_config(args.config)
-    check_scheduler(args.scheduler)  # before any folder or ledger exists
+    warning = check_scheduler(args.scheduler)  # before any folder or ledger exists
+    if warning:
+        print(f"{PROG}: warning: {warning}", file=sys.stderr)
+    workers = args.workers or os.cpu_count() or 1
+    plan_memory = check_config(config, workers, args.memory_budget)
     out = output_folder(Path(args.out) if args.out else Path("results") / config.name)
 
     def log(line: str) -> None:
@@ -218,8 +222,8 @@ def _eval(args) -> int:
 
     with folder_lock(out, command_line()):
         with storage(out, "cannot record the run"):
-            stats = run_experiment(config, out, workers=args.workers, scheduler=args.scheduler, fresh=args.fresh,
-                                   log=log)
+            stats = run_experiment(config, out, workers=workers, scheduler=args.scheduler, fresh=args.fresh,
+                                   log=log, plan_memory=plan_memory)
         if stats.interrupted:
             log(f"interrupted after {stats.seconds:.0f} s; {stats.plans} plans and {stats.trials} trials were "
                 f"recorded in {out}; run the same command again to resume")
@@ -295,50 +299,41 @@ def _settings(args, scene):
 
 
 def _plan(args) -> int:
-    from harness.belief import build_belief
-    from harness.quality import default_streams, draw_evaluation, estimate_p_f
+    from harness import pipeline
+    from harness.memory import check_single
     from harness.scene import load_scene
-    from harness.seeding import stream
-    from planners.base import Problem
     from planners.registry import make_planner
 
     scene = load_scene(args.scene)
-    planner = make_planner(args.planner, dict(args.param or []))  # bad input stops here, before any work
+    params = dict(args.param or [])
+    planner = make_planner(args.planner, params)  # bad input stops here, before any work
     settings = _settings(args, scene)
-    belief = build_belief(scene, stream(args.seed, scene.name, 0, "sensor"))
-    problem = Problem(belief, settings, time_budget_s=args.time_budget)
-    belief.prepare()  # the belief's grid fields are part of the belief, not of the planning time
-    start = time.perf_counter()
-    plan = planner.plan(problem, stream(args.seed, scene.name, 0, "planner", planner.name))
-    plan_time = time.perf_counter() - start
-    out = {"planner": planner.name, "scene": scene.name, "seed": args.seed, "status": plan.status,
-           "grasp": None, "estimate": plan.estimate, "plan_time_s": plan_time, "iterations": plan.iterations,
-           "evaluations": plan.evaluations, "p_f": None, "ci_low": None, "ci_high": None, "p_l": None,
-           "p_l_ci_low": None, "p_l_ci_high": None,
-           "sigma_g": settings.sigma_g, "friction": settings.friction, "params": planner.get_params(),
-           "message": plan.message}
-    rejected = plan.grasp.problem(scene.grid, settings.opening) if plan.grasp is not None else None
-    if rejected:  # as eval records it: the grasp is not executed, nor judged
-        out.update(status="invalid", message=f"grasp rejected: {rejected}",
-                   grasp={"g1": list(map(float, plan.grasp.g1)), "g2": list(map(float, plan.grasp.g2))})
-    elif plan.grasp is not None:
-        # The same evaluation draws for every planner at this seed (common random numbers).
-        draws = draw_evaluation(belief, 1000, *default_streams(args.seed, scene.name))
-        est = estimate_p_f(plan.grasp, draws, settings)[0]
-        out.update(grasp={"g1": list(plan.grasp.g1), "g2": list(plan.grasp.g2)}, p_f=est.p_f,
-                   ci_low=est.ci_low, ci_high=est.ci_high, p_l=est.p_l, p_l_ci_low=est.p_l_ci_low,
-                   p_l_ci_high=est.p_l_ci_high)
+    memory = check_single(scene, args.seed, pipeline.DRAWS, planner.shape_samples())
+    cell = pipeline.open_cell(scene, settings, args.seed, 0, pipeline.DRAWS)
+    # As eval records a cell's plan: the planner's label is its name as given.
+    row, fault = pipeline.plan(cell, args.planner, args.planner, params, args.time_budget, memory)
+    grasp = None if row["g1x"] is None else {"g1": [row["g1x"], row["g1y"]], "g2": [row["g2x"], row["g2y"]]}
+    out = {"planner": args.planner, "scene": scene.name, "seed": args.seed, "status": row["status"], "grasp": grasp,
+           "estimate": row["estimate"], "plan_time_s": row["plan_time_s"], "iterations": row["iterations"],
+           "evaluations": row["evaluations"], "p_f": None, "ci_low": None, "ci_high": None, "p_l": None,
+           "p_l_ci_low": None, "p_l_ci_high": None, "sigma_g": settings.sigma_g, "friction": settings.friction,
+           "params": planner.get_params(), "message": row["message"]}
+    if row["executed"]:  # judged on the evaluation draws every planner shares at this seed
+        analytic = pipeline.analytic_row(cell, row, pipeline.DRAWS, 0)
+        out.update({k: analytic[k] for k in ("p_f", "ci_low", "ci_high", "p_l", "p_l_ci_low", "p_l_ci_high")})
+    if fault:  # the planner's own traceback, for its author
+        print(fault.rstrip(), file=sys.stderr)
     if args.json:
         print(json.dumps(out))
     else:
-        print(f"{scene.name} / {planner.name}: {out['status']} in {plan_time:.3f} s "
-              f"({plan.iterations} iterations, {plan.evaluations} evaluations)")
-        if plan.grasp is not None and not rejected:
-            g1, g2 = plan.grasp.g1, plan.grasp.g2
-            print(f"grasp g1 = ({g1[0]:.4f}, {g1[1]:.4f}) m, g2 = ({g2[0]:.4f}, {g2[1]:.4f}) m; "
+        print(f"{scene.name} / {args.planner}: {out['status']} in {out['plan_time_s']:.3f} s "
+              f"({out['iterations']} iterations, {out['evaluations']} evaluations)")
+        if row["executed"]:
+            print(f"grasp g1 = ({grasp['g1'][0]:.4f}, {grasp['g1'][1]:.4f}) m, "
+                  f"g2 = ({grasp['g2'][0]:.4f}, {grasp['g2'][1]:.4f}) m; "
                   f"P_F = {out['p_f']:.3f} (95% CI {out['ci_low']:.3f} to {out['ci_high']:.3f}), "
                   f"P_L = {out['p_l']:.3f} (95% CI {out['p_l_ci_low']:.3f} to {out['p_l_ci_high']:.3f}); "
-                  f"planner's estimate {plan.estimate if plan.estimate is None else round(plan.estimate, 3)}")
+                  f"planner's estimate {out['estimate'] if out['estimate'] is None else round(out['estimate'], 3)}")
         if out["message"]:
             print(out["message"])
     return 0
@@ -437,6 +432,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="a Dask scheduler (tcp://HOST:PORT, or tls://HOST:PORT with Dask's TLS config), "
                         "or 'local' for a Dask LocalCluster")
+    p.add_argument("--memory-budget", type=_positive_number, default=None, metavar="GIB",
+                   help="memory one worker may use, GiB (default: 75%% of this machine's over the workers); "
+                        "a config whose largest cell needs more is refused before any work")
     p.add_argument("--fresh", action="store_true", help="discard this experiment's ledger rows and start over")
     p.add_argument("--no-report", action="store_true", help="skip the report at the end")
     p.set_defaults(func=_eval)

@@ -8,6 +8,7 @@ planner's name and parameters (the planner is constructed once), and every scene
 from __future__ import annotations
 
 import fnmatch
+import glob
 import hashlib
 import json
 from dataclasses import asdict, dataclass, field, replace
@@ -89,7 +90,7 @@ class ExperimentConfig:
                       "planners": tuple(PlannerEntry(**p) for p in d["planners"])})
 
     def protocol(self):
-        from harness.physics.trial import Protocol
+        from harness.protocol import Protocol
 
         return replace(Protocol(), **self.physics)
 
@@ -215,8 +216,12 @@ def _scene_files(root: Table, base_dir: Path) -> list[str]:
             raise root.error(f"scenes[{k}]", f"expected a scene name, glob or path, got {entry!r}")
         looks_like_path = entry.endswith(".toml") or "/" in entry
         if any(c in entry for c in "*?["):
-            matches = (sorted(str(p) for p in base_dir.glob(entry)) if looks_like_path
-                       else [str(LIBRARY / f"{n}.toml") for n in library_names() if fnmatch.fnmatch(n, entry)])
+            if Path(entry).is_absolute():  # Path.glob takes relative patterns only
+                matches = sorted(p for p in glob.glob(entry) if Path(p).is_file())
+            elif looks_like_path:
+                matches = sorted(str(p) for p in base_dir.glob(entry) if p.is_file())
+            else:
+                matches = [str(LIBRARY / f"{n}.toml") for n in library_names() if fnmatch.fnmatch(n, entry)]
             if not matches:
                 raise root.error(f"scenes[{k}]", f"'{entry}' matches no scene")
         else:

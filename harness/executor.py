@@ -57,14 +57,19 @@ class Executor:
 
 class LocalExecutor(Executor):
     """A pool of worker processes on this machine (started by forkserver: clean workers
-    without the parent's threads; each keeps its imports and caches between tasks)."""
+    without the parent's threads; each keeps its imports and caches between tasks).
+    Each worker ends as soon as this process ends, killed or not (harness.isolation's
+    die_with), so a kill -9 of the run leaves no worker behind."""
 
     def __init__(self, workers: int):
+        from harness.isolation import die_with
+
         super().__init__()
         self.workers = workers
         self.description = f"{workers} local worker process{'es' if workers > 1 else ''}"
         context = multiprocessing.get_context("forkserver")
-        self.pool = ProcessPoolExecutor(max_workers=workers, mp_context=context)
+        self.pool = ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=die_with,
+                                        initargs=(os.getpid(),))
 
     def _submit(self, fn, *args):
         return self.pool.submit(fn, *args)
@@ -110,13 +115,17 @@ def make_executor(workers: int | None, scheduler: str | None) -> Executor:
     return DaskExecutor(scheduler, workers) if scheduler else LocalExecutor(workers)
 
 
-def check_scheduler(address: str | None) -> None:
+def check_scheduler(address: str | None) -> str | None:
     """Refuse (InputError naming --scheduler) a --scheduler that cannot work, before any
-    work starts. None (the local pool) passes; ``local`` (a Dask LocalCluster) needs Dask
-    installed; any other address must read as SCHEME://HOST:PORT (SCHEME one of SCHEMES;
-    a bare HOST:PORT takes Dask's default scheme, tcp), Dask's TLS settings must load
-    (and exist, for tls:// and wss://), and a Dask scheduler must answer there within
-    CONNECT_TIMEOUT (TLS and Dask's handshake included).
+    work starts; return a warning to show, or None. None (the local pool) passes;
+    ``local`` (a Dask LocalCluster) needs Dask installed; any other address must read as
+    SCHEME://HOST:PORT (SCHEME one of SCHEMES; a bare HOST:PORT takes Dask's default
+    scheme, tcp) with a host a client can reach (not a wildcard such as 0.0.0.0, which a
+    scheduler listens on), Dask's TLS settings must load (and exist, for tls:// and
+    wss://), and a Dask scheduler must answer there within CONNECT_TIMEOUT (TLS and Dask's
+    handshake included). An unencrypted scheme (tcp, ws) to a host that is not this
+    machine's loopback gets the warning: whoever reaches that port can run code on the
+    workers.
 
     TLS settings are Dask's own config, read by the Client as well:
     ``distributed.comm.tls.ca-file``, ``.client.cert`` and ``.client.key`` (in a YAML file
@@ -126,20 +135,67 @@ def check_scheduler(address: str | None) -> None:
     Client connects, so only the address is checked here.
     """
     if address is None:
-        return
+        return None
     _distributed()
     if address == "local":
-        return
+        return None
+    scheme, host = _scheme_and_host(address)
     connection_args = _connection_args(address)
-    if connection_args is None:
-        return
+    if connection_args is not None:
+        try:
+            # In a thread of its own: the probe needs an event loop, and the caller may have one.
+            with ThreadPoolExecutor(1) as pool:
+                pool.submit(asyncio.run, _probe(address, connection_args)).result()
+        except Exception as exc:  # noqa: BLE001 - whatever stops the connection, the address is unusable
+            raise InputError("--scheduler", None, f"cannot connect to a Dask scheduler at {address}: "
+                                                  f"{describe(exc)}") from None
+    if scheme in ("tcp", "ws") and not _loopback(host):
+        return (f"--scheduler {address} is not encrypted: anyone who can reach {host} on that port can run code "
+                f"on the workers; use tls:// with Dask's TLS settings (docs/experiments.md, "
+                f"\"Security of a cluster\")")
+    return None
+
+
+#: Addresses a server listens on to accept every interface; no client can connect to them.
+WILDCARDS = ("0.0.0.0", "::", "*")
+
+
+def _scheme_and_host(address: str) -> tuple[str, str]:
+    """The scheme and host of SCHEME://HOST:PORT; InputError when it does not parse or
+    names a wildcard address."""
+    from distributed.comm.addressing import parse_address, parse_host_port
+
+    expected = f"expected 'local' or SCHEME://HOST:PORT with SCHEME one of {', '.join(SCHEMES)}, got '{address}'"
     try:
-        # In a thread of its own: the probe needs an event loop, and the caller may have one.
-        with ThreadPoolExecutor(1) as pool:
-            pool.submit(asyncio.run, _probe(address, connection_args)).result()
-    except Exception as exc:  # noqa: BLE001 - whatever stops the connection, the address is unusable
-        raise InputError("--scheduler", None, f"cannot connect to a Dask scheduler at {address}: "
-                                              f"{describe(exc)}") from None
+        scheme, location = parse_address(address)
+        host, port = parse_host_port(location)
+    except (TypeError, ValueError):
+        raise InputError("--scheduler", None, expected) from None
+    if scheme not in SCHEMES or not host:
+        raise InputError("--scheduler", None, expected)
+    if host.strip("[]") in WILDCARDS:
+        raise InputError("--scheduler", None, f"'{address}' is a wildcard address, which a scheduler listens on "
+                                              "but no client can connect to: give the scheduler's host name or IP")
+    if not 1 <= port <= 65535:
+        raise InputError("--scheduler", None, f"'{address}': port {port} is out of range [1, 65535]")
+    return scheme, host
+
+
+def _loopback(host: str) -> bool:
+    """Whether ``host`` is this machine's loopback (127.0.0.0/8, ::1, or a name that
+    resolves only to it)."""
+    import ipaddress
+    import socket
+
+    try:
+        return ipaddress.ip_address(host.strip("[]")).is_loopback
+    except ValueError:
+        pass
+    try:
+        found = {info[4][0] for info in socket.getaddrinfo(host, None)}
+    except OSError:
+        return False
+    return bool(found) and all(ipaddress.ip_address(a.split("%")[0]).is_loopback for a in found)
 
 
 def _distributed():
@@ -157,19 +213,9 @@ def _connection_args(address: str) -> dict | None:
     config), or None when a security loader will supply them; InputError for an address
     that does not parse, or TLS settings that are missing or do not load."""
     import dask
-    from distributed.comm.addressing import parse_address, parse_host_port
     from distributed.security import Security
 
-    expected = f"expected 'local' or SCHEME://HOST:PORT with SCHEME one of {', '.join(SCHEMES)}, got '{address}'"
-    try:
-        scheme, location = parse_address(address)
-        host, port = parse_host_port(location)
-    except (TypeError, ValueError):
-        raise InputError("--scheduler", None, expected) from None
-    if scheme not in SCHEMES or not host:
-        raise InputError("--scheduler", None, expected)
-    if not 1 <= port <= 65535:
-        raise InputError("--scheduler", None, f"'{address}': port {port} is out of range [1, 65535]")
+    scheme, _ = _scheme_and_host(address)
     if dask.config.get("distributed.client.security-loader", None):
         return None
     try:

@@ -25,9 +25,11 @@ class RunStats:
 
 
 def run_experiment(config: ExperimentConfig, out_dir: Path, workers: int | None = None,
-                   scheduler: str | None = None, fresh: bool = False, log=print) -> RunStats:
-    """Run (or resume) an experiment into ``out_dir``'s ledger. The caller holds the
-    folder's lock (harness.outputs.folder_lock)."""
+                   scheduler: str | None = None, fresh: bool = False, log=print,
+                   plan_memory: float | None = None) -> RunStats:
+    """Run (or resume) an experiment into ``out_dir``'s ledger; each plan's process may
+    grow by ``plan_memory`` bytes (harness.memory). The caller holds the folder's lock
+    (harness.outputs.folder_lock)."""
     from harness.executor import make_executor
     from harness.ledger import FILENAME, Ledger
 
@@ -54,7 +56,7 @@ def run_experiment(config: ExperimentConfig, out_dir: Path, workers: int | None 
                 bars = [_Progress("plans", n_plans, done_plans, 0, start, log),
                         _Progress("trials", n_trials, done_trials, 1, start, log)]
                 try:
-                    _drive(config, ledger, executor, todo, stats, bars)
+                    _drive(config, ledger, executor, todo, stats, bars, plan_memory)
                     status = "complete" if not stats.errors else "errors"
                 except KeyboardInterrupt:
                     stats.interrupted = True
@@ -96,11 +98,12 @@ def _work_left(ledger, config: ExperimentConfig) -> tuple[list, tuple[int, int, 
     return todo, (n_plans, n_trials, done_plans, done_trials)
 
 
-def _drive(config: ExperimentConfig, ledger, executor, todo: list, stats: RunStats, bars: list) -> None:
+def _drive(config: ExperimentConfig, ledger, executor, todo: list, stats: RunStats, bars: list,
+           plan_memory: float | None) -> None:
     """Submit the cells, then each plan's batches as its cell returns; record every result."""
     key = config.hash
     for path, r, labels, _, _ in todo:
-        executor.submit(run_cell, config, path, r, labels, tag=("cell", path, r))
+        executor.submit(run_cell, config, path, r, labels, plan_memory, tag=("cell", path, r))
     known = {(path, r): (plans, trials) for path, r, _, plans, trials in todo}
     while executor.pending:
         tag, future = executor.next_done()

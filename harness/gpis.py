@@ -15,8 +15,6 @@ from threadpoolctl import ThreadpoolController
 
 #: Names accepted by GPIS.sample and GPIS.sample_grid.
 SAMPLING_METHODS = ("fast", "exact", "pathwise", "weight-space")
-#: Rows of a kernel block built at once; bounds the temporaries to a few hundred MB.
-_CHUNK = 2048
 #: Relative eigenvalue cut-off of the separable prior basis: the 1-D kernel is reproduced
 #: to ~5e-9 of the prior variance, the 2-D one to ~1e-8 (tested), under 1e-4 of the
 #: posterior variance at a well-observed surface.
@@ -26,6 +24,12 @@ _BASIS_TOL = 1e-8
 _JITTER = 1e-10
 #: Largest number of distinct coordinates per axis used as exact basis nodes.
 _MAX_NODES = 1500
+#: The grid fields use the weight-space posterior up to an r^2 x r^2 matrix of this many
+#: bytes, pointwise prediction (in chunks of PREDICT_CHUNK points) beyond.
+FIELDS_BASIS_MAX_BYTES = 64e6
+#: Points per chunk of pointwise prediction: bounds its temporaries to about 100 bytes
+#: x PREDICT_CHUNK x the observed scalars (harness.memory).
+PREDICT_CHUNK = 2048
 
 
 def select_active_set(points: np.ndarray, values: np.ndarray, noise_var: np.ndarray,
@@ -180,7 +184,7 @@ class GPIS:
         P = np.asarray(points, dtype=float).reshape(-1, 2)
         mean = np.empty(len(P))
         var = np.empty(len(P))
-        for s in _chunks(len(P)):
+        for s in _chunks(len(P), PREDICT_CHUNK):
             Ks = _cov_rows(P[s], self.X_, self.gradient_mask_, self.lengthscale_, self.scale_, "value")
             mean[s] = self.prior_mean_ + Ks @ self.alpha_
             A = sla.solve_triangular(self.L_, Ks.T, lower=True, check_finite=False)
@@ -193,7 +197,7 @@ class GPIS:
         P = np.asarray(points, dtype=float).reshape(-1, 2)
         grad = np.empty((len(P), 2))
         var = np.empty((len(P), 2))
-        for s in _chunks(len(P)):
+        for s in _chunks(len(P), PREDICT_CHUNK):
             Kg = _cov_rows(P[s], self.X_, self.gradient_mask_, self.lengthscale_, self.scale_, "gradient")
             for i in range(2):
                 grad[s, i] = Kg[i] @ self.alpha_
@@ -217,7 +221,7 @@ class GPIS:
         ys = np.asarray(ys, dtype=float)
         with single_threaded_blas():
             bx, by = self._basis(0, xs), self._basis(1, ys)
-            if (bx.rank * by.rank) ** 2 * 8 > 64e6:
+            if (bx.rank * by.rank) ** 2 * 8 > FIELDS_BASIS_MAX_BYTES:
                 xx, yy = np.meshgrid(xs, ys)
                 P = np.column_stack([xx.ravel(), yy.ravel()])
                 mean, var = self.predict(P)
@@ -400,11 +404,7 @@ class GPIS:
 
     def _basis(self, axis: int, query: np.ndarray) -> "_Basis1D":
         """The 1-D basis along ``axis`` whose nodes cover the query and training coordinates."""
-        coords = np.unique(np.round(np.concatenate([np.asarray(query).ravel(), self.X_[:, axis]]), 12))
-        if len(coords) > _MAX_NODES:
-            # Off-node coordinates use the Nystrom extension from a dense uniform node set.
-            lo, hi = coords[0] - self.lengthscale_, coords[-1] + self.lengthscale_
-            coords = np.linspace(lo, hi, int(np.ceil((hi - lo) / (0.2 * self.lengthscale_))) + 1)
+        coords = _basis_nodes(np.concatenate([np.asarray(query).ravel(), self.X_[:, axis]]), self.lengthscale_)
         key = (axis, coords.tobytes())
         if key not in self._cache:
             self._cache[key] = _Basis1D(coords, self.lengthscale_)
@@ -432,15 +432,8 @@ class GPIS:
         return self.fast_strategy(len(xs), len(ys), bx.rank, by.rank, self._grid_index(xs, ys) is not None, n)
 
     def fast_strategy(self, nx: int, ny: int, rx: int, ry: int, on_grid: bool, n: int) -> str:
-        """The cheaper exact sampler for n draws on an nx x ny grid: 'pathwise' or
-        'weight-space', from counted multiply-adds with rates measured on this project's
-        reference machine: weight-space pays a one-off M r^4 + r^6 / 3 (large GEMMs,
-        about 3x the rate of the per-draw work) and r^4 / 4 per draw; pathwise pays
-        D^2 + 6 M^2 r + 4 M r^2 per draw at about 0.8x that rate, plus ~30 us overhead."""
-        d, r2 = len(self.targets_), rx * ry
-        weight_space = n * r2 * r2 / 4 + (max(nx, ny) * r2 * r2 + r2**3 / 3) / 3
-        pathwise = n * (1.2 * (d * d + 3 * nx * ny * (rx + ry) + 4 * max(nx, ny) * r2) + 3e5)
-        return "pathwise" if on_grid and pathwise < weight_space else "weight-space"
+        """The cheaper exact sampler for n draws on an nx x ny grid (see fast_strategy)."""
+        return fast_strategy(len(self.targets_), nx, ny, rx, ry, on_grid, n)
 
     def _weight_space(self, bx: "_Basis1D", by: "_Basis1D") -> "_WeightSpace":
         """Posterior of the separable coefficients (cached per pair of bases)."""
@@ -528,7 +521,7 @@ class GPIS:
         row = 0
         for kind in ("value", "gradient") if with_gradients else ("value",):
             for comp in range(2 if kind == "gradient" else 1):
-                for s in _chunks(len(P)):
+                for s in _chunks(len(P), PREDICT_CHUNK):
                     block = _cov_rows(P[s], P, every, l, c, kind)
                     tblock = _cov_rows(P[s], self.X_, self.gradient_mask_, l, c, kind)
                     if kind == "gradient":
@@ -601,6 +594,37 @@ class _Basis1D:
             f[off], df[off] = feat[: off.sum()], feat[off.sum():]
         df /= self.lengthscale
         return f, df
+
+
+def fast_strategy(d: int, nx: int, ny: int, rx: int, ry: int, on_grid: bool, n: int) -> str:
+    """The cheaper exact sampler for n draws on an nx x ny grid, with d observed scalars
+    and basis ranks rx, ry: 'pathwise' or 'weight-space', from counted multiply-adds with
+    rates measured on this project's reference machine: weight-space pays a one-off
+    M r^4 + r^6 / 3 (large GEMMs, about 3x the rate of the per-draw work) and r^4 / 4 per
+    draw; pathwise pays D^2 + 6 M^2 r + 4 M r^2 per draw at about 0.8x that rate, plus
+    ~30 us overhead."""
+    r2 = rx * ry
+    weight_space = n * r2 * r2 / 4 + (max(nx, ny) * r2 * r2 + r2**3 / 3) / 3
+    pathwise = n * (1.2 * (d * d + 3 * nx * ny * (rx + ry) + 4 * max(nx, ny) * r2) + 3e5)
+    return "pathwise" if on_grid and pathwise < weight_space else "weight-space"
+
+
+def _basis_nodes(coords: np.ndarray, lengthscale: float) -> np.ndarray:
+    """The nodes of a 1-D basis covering ``coords``: the distinct coordinates, or, when
+    there are more than _MAX_NODES, a dense uniform set (off-node coordinates then use
+    the Nystrom extension)."""
+    nodes = np.unique(np.round(coords, 12))
+    if len(nodes) > _MAX_NODES:
+        lo, hi = nodes[0] - lengthscale, nodes[-1] + lengthscale
+        nodes = np.linspace(lo, hi, int(np.ceil((hi - lo) / (0.2 * lengthscale))) + 1)
+    return nodes
+
+
+def grid_basis_rank(coords: np.ndarray, lengthscale: float) -> int:
+    """The rank of the 1-D basis that the grid fields and the fast samplers use along a
+    grid axis with coordinates ``coords`` when every observation lies on the grid (as the
+    sensor's readings do): a memory estimate's r (harness.memory)."""
+    return _Basis1D(_basis_nodes(np.asarray(coords, dtype=float), lengthscale), lengthscale).rank
 
 
 def _nearest(sorted_coords: np.ndarray, coords: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -680,7 +704,7 @@ def _check_method(method: str) -> None:
         raise ValueError(f"unknown sampling method {method!r} ({', '.join(SAMPLING_METHODS)})")
 
 
-def _chunks(n: int, size: int = _CHUNK):
+def _chunks(n: int, size: int):
     return [slice(i, min(i + size, n)) for i in range(0, n, size)]
 
 

@@ -66,6 +66,33 @@ _COLUMNS = {
 }
 
 
+#: What each column must hold, checked when a ledger is opened (a hand-edited or damaged
+#: row is bad input, not a traceback later): "int", "real" (an integer passes), "text",
+#: "json" (text that parses); a trailing "?" allows NULL.
+_KINDS = {
+    "runs": {"run": "int", "config_hash": "text", "name": "text", "config": "json", "environment": "json",
+             "started": "text", "ended": "text?", "status": "text"},
+    "plans": {"config_hash": "text", "scene": "text", "realisation": "int", "planner": "text",
+              "planner_name": "text", "params": "json", "status": "text", "executed": "int", "message": "text",
+              "g1x": "real?", "g1y": "real?", "g2x": "real?", "g2y": "real?", "estimate": "real?",
+              "plan_time_s": "real", "iterations": "int", "evaluations": "int", "trace": "json"},
+    "analytic": {"config_hash": "text", "scene": "text", "realisation": "int", "planner": "text", "draws": "int",
+                 "p_f": "real", "ci_low": "real", "ci_high": "real", "ferrari_canny_mean": "real",
+                 "failures": "json", "p_l": "real?", "p_l_ci_low": "real?", "p_l_ci_high": "real?",
+                 "pivots": "int?", "reasons": "text?"},
+    "trials": {"config_hash": "text", "scene": "text", "realisation": "int", "planner": "text", "shapes": "text",
+               "trial": "int", "outcome": "text", "steps": "int", "grip_width": "real?", "closing_turn": "real?",
+               "rise": "real?", "pivot": "real?"},
+}
+#: SQLite's storage classes each kind accepts.
+_STORAGE = {"int": ("integer",), "real": ("integer", "real"), "text": ("text",), "json": ("text",)}
+_EXPECTED = {"int": "an integer", "real": "a number", "text": "text", "json": "JSON text"}
+#: The columns that name a row in an error message.
+_ROW_KEYS = {"runs": ("run",), "plans": ("scene", "realisation", "planner"),
+             "analytic": ("scene", "realisation", "planner"),
+             "trials": ("scene", "realisation", "planner", "shapes", "trial")}
+
+
 def now() -> str:
     return datetime.now(UTC).isoformat(timespec="seconds")
 
@@ -113,6 +140,36 @@ class Ledger:
         self.db.execute("PRAGMA synchronous = NORMAL")
         if not tables:  # one script, one transaction: a half-created ledger never exists
             self.db.executescript(f"BEGIN; {_SCHEMA} INSERT INTO meta VALUES ('format', '{FORMAT}'); COMMIT;")
+        else:
+            self._check_rows()
+
+    def _check_rows(self) -> None:
+        """Every row's columns hold what their kind says (_KINDS); InputError naming the
+        table, the row and the column of the first that does not."""
+        for table, kinds in _KINDS.items():
+            for column, kind in kinds.items():
+                nullable = kind.endswith("?")
+                kind = kind.rstrip("?")
+                allowed = _STORAGE[kind] + (("null",) if nullable else ())
+                marks = ", ".join("?" * len(allowed))
+                bad = self.db.execute(f"SELECT rowid, {column} FROM {table} WHERE typeof({column}) NOT IN ({marks}) "
+                                      "ORDER BY rowid LIMIT 1", allowed).fetchone()
+                if bad is not None:
+                    self._bad_row(table, bad[0], column, f"expected {_EXPECTED[kind]}, got {bad[1]!r}")
+                if kind != "json":
+                    continue
+                for rowid, text in self.db.execute(f"SELECT rowid, {column} FROM {table} WHERE {column} IS NOT NULL"):
+                    try:
+                        json.loads(text)
+                    except ValueError as exc:
+                        self._bad_row(table, rowid, column, f"is not valid JSON ({exc})")
+
+    def _bad_row(self, table: str, rowid: int, column: str, problem: str):
+        keys = _ROW_KEYS[table]
+        values = self.db.execute(f"SELECT {', '.join(keys)} FROM {table} WHERE rowid = ?", (rowid,)).fetchone()
+        which = ", ".join(f"{k} {v!r}" for k, v in zip(keys, values, strict=True))
+        raise InputError(str(self.path), f"table {table}, row {rowid} ({which}), column {column}",
+                         f"{problem}; the ledger was changed by hand or is damaged")
 
     def close(self) -> None:
         self.db.close()

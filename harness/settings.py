@@ -93,7 +93,7 @@ def resolve(scene, overrides: Mapping[str, float] | None = None, protocol=None) 
     BOUNDS) and the lift of ``protocol`` (the default trial protocol when None). A load
     factor in the overrides replaces the protocol's (1 makes the lift model static)."""
     if protocol is None:
-        from harness.physics.trial import Protocol
+        from harness.protocol import Protocol
 
         protocol = Protocol()
     values = {name: float(getattr(getattr(scene, table), name)) for name, table in SCENE_FIELDS.items()}

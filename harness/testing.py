@@ -9,8 +9,11 @@ import time
 
 import numpy as np
 
+from harness import isolation
 from harness.belief import Belief, build_belief
+from harness.errors import describe
 from harness.gpis import GPIS
+from harness.readonly import InputsChanged, changes, fingerprint
 from harness.scene import load_scene
 from harness.seeding import stream
 from harness.sensor import NORMAL, Observations
@@ -25,9 +28,12 @@ def check_planner(planner_class, scenes=("disk", "rectangle"), seeds=(0, 1), tim
     BOUNDS name parameters and hold their defaults, every constructor parameter has a
     default and is stored under its own name; on every scene and seed,
     ``plan`` returns a Plan with a known status and a grasp that is finite, inside the
-    grid and no wider than the opening; the same seed gives the same grasp; with a time
-    budget the plan returns within the budget plus ``slack`` seconds; on a belief with no
-    surface the plan's status is "no_surface" (not an exception).
+    grid and no wider than the opening; the same seed gives the same grasp; the plan
+    changes nothing it was given (no write into the problem's read-only arrays, nothing
+    reachable from the problem changed: harness.readonly); with a time budget the plan
+    returns within the budget plus ``slack`` seconds (it runs in a process of its own,
+    killed then); on a belief with no surface the plan's status is "no_surface" (not an
+    exception).
     """
     from planners.base import STATUSES, Plan, Planner, Problem
     from planners.registry import class_problem, parameter_value
@@ -59,28 +65,35 @@ def check_planner(planner_class, scenes=("disk", "rectangle"), seeds=(0, 1), tim
         scene = load_scene(scene_name)
         belief = build_belief(scene, stream(0, "conformance", scene_name, "sensor")).prepare()
         problem = Problem.for_belief(belief)
+        # First, in a process of its own, killed at budget + slack, as an experiment kills
+        # a planner at its deadline (harness.deadline): a planner that ignores its budget
+        # fails here instead of hanging the checks that follow.
+        budgeted = Problem.for_belief(belief, time_budget_s=time_budget)
+        where = f"{name} on {scene_name} with a time budget"
+        outcome = isolation.call(_budgeted_plan, planner, budgeted, stream(99, "conformance", scene_name, name),
+                                 where, deadline_s=time_budget + slack)
+        _require(outcome.kind != "overtime", f"{where}: ignores its deadline: still planning {outcome.seconds:.1f} s "
+                 f"after it started, with a budget of {time_budget:g} s (allowed slack {slack:g} s); killed")
+        _require(outcome.kind == "returned", outcome.message.removeprefix("AssertionError: ") if
+                 outcome.message.startswith("AssertionError: ") else f"{where}: {outcome.message}")
+
         for seed in seeds:
+            where = f"{name} on {scene_name}, seed {seed}"
             start = time.perf_counter()
-            plan = planner.plan(problem, stream(seed, "conformance", scene_name, name))
+            plan = _plan_untouched(planner, problem, stream(seed, "conformance", scene_name, name), where)
             report[(scene_name, seed)] = time.perf_counter() - start
-            _check_plan(plan, problem, f"{name} on {scene_name}, seed {seed}", Plan, STATUSES)
-            _require(plan.status == "ok", f"{name} on {scene_name}, seed {seed}: status {plan.status!r}, "
-                     f"expected 'ok' ({plan.message})")
-            again = planner_class(**(params or {})).plan(problem, stream(seed, "conformance", scene_name, name))
+            _check_plan(plan, problem, where, Plan, STATUSES)
+            _require(plan.status == "ok", f"{where}: status {plan.status!r}, expected 'ok' ({plan.message})")
+            again = _plan_untouched(planner_class(**(params or {})), problem,
+                                    stream(seed, "conformance", scene_name, name), where)
             _require(again.grasp == plan.grasp, f"{name} on {scene_name}: the same seed gave different grasps "
                      f"({plan.grasp} and {again.grasp})")
 
-        budgeted = Problem.for_belief(belief, time_budget_s=time_budget)
-        start = time.perf_counter()
-        plan = planner.plan(budgeted, stream(99, "conformance", scene_name, name))
-        elapsed = time.perf_counter() - start
-        _require(elapsed <= time_budget + slack, f"{name} on {scene_name}: took {elapsed:.2f} s with a budget of "
-                 f"{time_budget:g} s (allowed slack {slack:g} s)")
-        _check_plan(plan, budgeted, f"{name} on {scene_name} with a time budget", Plan, STATUSES)
-
     empty = Problem.for_belief(_belief_without_surface(load_scene(scenes[0])))
     try:
-        plan = planner.plan(empty, stream(0, "conformance", "empty", name))
+        plan = _plan_untouched(planner, empty, stream(0, "conformance", "empty", name), f"{name} with no surface")
+    except AssertionError:
+        raise
     except Exception as exc:  # the contract: say so in the Plan instead
         raise AssertionError(f"{name}: raised {type(exc).__name__} on a belief with no surface: {exc}") from None
     _require(isinstance(plan, Plan) and plan.status == "no_surface" and plan.grasp is None,
@@ -90,6 +103,30 @@ def check_planner(planner_class, scenes=("disk", "rectangle"), seeds=(0, 1), tim
 
 
 _EMPTY = __import__("inspect").Parameter.empty
+
+
+def _plan_untouched(planner, problem, rng, where: str):
+    """``planner.plan(problem, rng)``, failing (AssertionError) when the plan wrote into
+    its inputs: a write into a read-only array, or anything reachable from the problem
+    changed (harness.readonly: its arrays' bytes, its numbers, its objects)."""
+    before = fingerprint(problem)
+    try:
+        plan = planner.plan(problem, rng)
+    except ValueError as exc:
+        if "read-only" in str(exc):
+            raise AssertionError(f"{where}: writes into its inputs ({describe(exc)}); the problem is read-only: "
+                                 "copy what you change") from None
+        raise
+    changed = changes(before, fingerprint(problem))
+    _require(not changed, f"{where}: {InputsChanged(changed)}" if changed else "")
+    return plan
+
+
+def _budgeted_plan(planner, problem, rng, where: str) -> None:
+    """The budgeted check, in its own process: plan (untouched inputs), then check the plan."""
+    from planners.base import STATUSES, Plan
+
+    _check_plan(_plan_untouched(planner, problem, rng, where), problem, where, Plan, STATUSES)
 
 
 def _require(condition, message: str) -> None:

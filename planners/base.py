@@ -14,7 +14,11 @@ Write a planner by subclassing :class:`Planner`:
 - implement ``plan(problem, rng)`` (abstract here): use only ``rng`` for randomness, check
   ``problem.time_budget_s`` between units of work, and return a Plan whose status says
   what happened (never raise for a belief without a surface: return
-  ``Plan.without_grasp("no_surface", ...)``).
+  ``Plan.without_grasp("no_surface", ...)``). The problem is read-only: its arrays refuse
+  writes (copy what you change). In an experiment the harness runs each plan in a process
+  of its own and kills it at 1.5 x the budget + 1 s (harness.deadline);
+- optionally, ``shape_samples()``: how many posterior shape samples ``plan`` holds at
+  once, for the memory estimate made before a run.
 
 Register it in your own package under the entry-point group ``gpis_harness.planners``
 (see docs/planners.md) and check it with ``harness.testing.check_planner``.
@@ -32,6 +36,7 @@ import numpy as np
 
 from harness.belief import Belief
 from harness.grasp import Grasp
+from harness.readonly import freeze
 from harness.settings import GraspSettings, resolve
 
 #: What a Plan's status may say.
@@ -52,11 +57,19 @@ def check_quality(quality: str) -> str:
 class Problem:
     """What a planner must solve: the shape belief, the grasp's settings (gripper, friction
     and its spread, approach noise sigma_g, the object's extrusion and the lift; see
-    harness.settings.GraspSettings) and an optional time budget in seconds."""
+    harness.settings.GraspSettings) and an optional time budget in seconds.
+
+    Read-only: making a Problem makes every array reachable from it non-writeable (the
+    belief's fields, its GP's fitted state, its observations, the scene's fields), so a
+    write raises ValueError in the planner. In an experiment each plan also runs in a
+    process of its own, where anything else it changes is its own copy."""
 
     belief: Belief
     settings: GraspSettings
     time_budget_s: float | None = None
+
+    def __post_init__(self):
+        freeze(self)
 
     @classmethod
     def for_belief(cls, belief: Belief, settings: GraspSettings | None = None,
@@ -114,6 +127,13 @@ class Planner(ABC):
     def get_params(self) -> dict:
         """The parameters this planner was made with."""
         return {k: getattr(self, k) for k in self.parameters()}
+
+    def shape_samples(self) -> int:
+        """How many posterior shape samples ``plan`` holds at once (its pool of draws), for
+        the memory estimate made before a run (harness.memory). Optional: 0 by default;
+        a planner that holds many should say so, or a run that cannot hold them is
+        refused only when its plan runs out of memory (its status is then 'crashed')."""
+        return 0
 
 
 class Stopwatch:

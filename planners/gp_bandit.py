@@ -62,6 +62,9 @@ class GPBandit(Planner):
                              f"{' or '.join(PRIOR_POLICIES)} (policy {policy!r}, prior_draws {prior_draws})")
         self.prior_draws = float(prior_draws)
 
+    def shape_samples(self) -> int:
+        return self.samples + (COM_SAMPLES if self.quality == "lift" else 0)
+
     def plan(self, problem: Problem, rng: np.random.Generator, record: list | None = None) -> Plan:
         """As Planner.plan; ``record`` (a list) receives (seconds, draws used, best grasp
         (2, 2)) before the first round (0 draws: the answer of the prior alone, the model's

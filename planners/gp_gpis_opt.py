@@ -80,6 +80,9 @@ class GPGPISOpt(Planner):
         self.angular_noise_deg = float(angular_noise_deg)
         self.quality = check_quality(quality)
 
+    def shape_samples(self) -> int:
+        return (self.rerank_samples if self.finalists else 0) + (COM_SAMPLES if self.quality == "lift" else 0)
+
     def plan(self, problem: Problem, rng: np.random.Generator) -> Plan:
         clock = Stopwatch(problem.time_budget_s)
         belief = problem.belief

@@ -25,6 +25,9 @@ class GPP(Planner):
         self.angular_noise_deg = float(angular_noise_deg)
         self.quality = check_quality(quality)
 
+    def shape_samples(self) -> int:
+        return self.samples
+
     def plan(self, problem: Problem, rng: np.random.Generator, record: list | None = None) -> Plan:
         """As Planner.plan; ``record`` (a list) receives (seconds, grasps, P_F) per chunk of
         candidates, for convergence studies."""

@@ -84,11 +84,20 @@ def test_quality_json_holds_the_estimate_its_interval_and_failures(capsys):
     assert json.loads(capsys.readouterr().out) == out
 
 
-def test_bench_planning_json_reports_seconds_per_estimate():
-    # --seeds 0 skips the bandit study (tests/test_bandit.py runs it small).
-    proc = subprocess.run([sys.executable, "-m", "harness", "bench", "planning", "--sizes", "20,25", "--seeds", "0",
-                           "--json"], capture_output=True, text=True, timeout=600, check=True)
-    result = json.loads(proc.stdout)
+def test_bench_planning_json_reports_seconds_per_estimate(monkeypatch, capsys):
+    # --seeds 0 skips the bandit study (tests/test_bandit.py runs it small). The lift
+    # planners' comparison runs on two scenes and one seed instead of the library and
+    # three, the convergence study on one seed instead of three: the whole study took
+    # 250 s of the suite.
+    import harness.scene
+    from harness import bench
+
+    monkeypatch.setattr(harness.scene, "library_names", lambda: ["disk", "rectangle"])
+    monkeypatch.setattr(bench, "CONVERGENCE_SEEDS", 1)
+    monkeypatch.setattr(bench, "LIFT_SEEDS", 1)
+    assert main(["bench", "planning", "--sizes", "20,25", "--seeds", "0", "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert [r["scene"] for r in result["lift_planners"]["rows"]] == ["disk", "rectangle"]
     assert result["bandit"] == {"seeds": 0, "first_seed": 0, "scenes": result["bandit"]["scenes"], "candidates": 100,
                                 "shared_draws": [], "prior_draws": [], "runs": [], "summary": None}
     assert [r["M"] for r in result["rows"]] == [20, 25]

@@ -7,6 +7,7 @@ import shutil
 import socket
 import subprocess
 import threading
+import time
 
 import pytest
 
@@ -58,6 +59,36 @@ def test_an_address_that_does_not_parse_is_refused_in_one_line(address, complain
     assert err.value.source == "--scheduler" and complaint in str(err.value) and "\n" not in str(err.value)
 
 
+@pytest.mark.parametrize("address", ["tcp://0.0.0.0:8786", "tcp://[::]:8786", "tls://0.0.0.0:8786"])
+def test_a_wildcard_address_is_refused_at_once(address):
+    start = time.monotonic()
+    with pytest.raises(InputError, match="is a wildcard address, which a scheduler listens on but no client can "
+                                         "connect to"):
+        check_scheduler(address)
+    assert time.monotonic() - start < 2.0  # no connection tried (it took the 10 s timeout before)
+
+
+@pytest.mark.parametrize(("host", "loopback"), [("127.0.0.1", True), ("127.3.4.5", True), ("[::1]", True),
+                                                ("localhost", True), ("192.0.2.10", False), ("10.1.2.3", False),
+                                                ("no-such-host.invalid", False)])
+def test_loopback_is_told_apart_from_other_hosts(host, loopback):
+    assert executor._loopback(host) is loopback
+
+
+@pytest.mark.parametrize(("address", "warned"), [("tcp://192.0.2.10:8786", True), ("ws://192.0.2.10:8786", True),
+                                                 ("tcp://127.0.0.1:8786", False)])
+def test_plain_tcp_beyond_this_machine_gets_one_warning_line(no_tls, monkeypatch, address, warned):
+    async def answers(address, connection_args):  # a scheduler is there
+        return None
+
+    monkeypatch.setattr(executor, "_probe", answers)
+    warning = check_scheduler(address)
+    assert (warning is not None) is warned
+    if warned:
+        assert "\n" not in warning and "not encrypted" in warning and "tls://" in warning and \
+            "Security of a cluster" in warning
+
+
 def test_a_tls_address_without_dask_tls_settings_is_refused(no_tls):
     with pytest.raises(InputError, match="'tls://127.0.0.1:8786' needs Dask's TLS settings: "
                                          "distributed.comm.tls.ca-file and distributed.comm.tls.client.cert"):
@@ -101,7 +132,7 @@ def test_a_running_scheduler_passes_and_runs_tasks(no_tls):
 
     with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, protocol="tcp://",
                       dashboard_address=None) as cluster:
-        check_scheduler(cluster.scheduler_address)
+        assert check_scheduler(cluster.scheduler_address) is None  # loopback: no warning
         pool = executor.DaskExecutor(cluster.scheduler_address, 1)
         try:
             pool.submit(pow, 2, 10, tag="power")

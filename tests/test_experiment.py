@@ -21,7 +21,7 @@ from hypothesis import strategies as st
 
 from harness.cli import main
 from harness.config import load_config
-from harness.physics.trial import Protocol
+from harness.protocol import Protocol
 from harness.report import SUMMARY_COLUMNS
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -352,12 +352,12 @@ def test_a_cell_plans_with_one_blas_thread_and_the_same_results(tmp_path, monkey
     monkeypatch.setattr(harness.belief, "build_belief", spy)
     config = load_config(_write(tmp_path, TINY))
     path, labels = config.scenes[0], ("mean-shape",)
-    limited, free = run_cell(config, path, 0, labels), _cell(config, path, 0, labels)
+    limited, free = run_cell(config, path, 0, labels), _cell(config, path, 0, labels, None)
     assert seen == [{1}, outside]
     assert blas_threads() == outside
     keys = ("g1x", "g1y", "g2x", "g2y", "estimate")
     assert [limited.plans[0][k] for k in keys] == [free.plans[0][k] for k in keys]
-    assert all(a.equals_exact(b, 0.0) for a, b in zip(limited.polygons, free.polygons, strict=True))
+    assert all(a.equals_exact(b, 0.0) for a, b in zip(limited.posterior.polygons, free.posterior.polygons, strict=True))
 
 
 def test_physics_overrides_reach_the_protocol(tmp_path):

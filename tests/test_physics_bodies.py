@@ -262,7 +262,8 @@ def test_the_jaws_pass_through_the_foot_and_grip_the_prism():
     the arm as if the foot were not there: the grip width is the arm's 4 cm with the foot
     and without it, and both grips hold."""
     from harness.physics.gripper import GripperSpec
-    from harness.physics.trial import Protocol, Trial
+    from harness.physics.trial import Trial
+    from harness.protocol import Protocol
 
     gripper = GripperSpec(opening=0.1, jaw_width=0.01, plate_height=0.01, force=20.0, closing_speed=0.05,
                           object_thickness=0.03).adapter()

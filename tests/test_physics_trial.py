@@ -12,7 +12,8 @@ import pytest
 
 from harness.canonical import canonical
 from harness.physics.simulate import make_trials, truth_polygon
-from harness.physics.trial import Protocol, Runner, Trial, approach_blocked, free_travel
+from harness.physics.trial import Runner, Trial, approach_blocked, free_travel
+from harness.protocol import Protocol
 from harness.scene import load_scene
 from harness.settings import resolve
 
@@ -107,19 +108,14 @@ def test_friction_is_the_coulomb_cone_unless_the_protocol_asks_for_the_pyramid()
 
 
 def test_the_same_seed_gives_the_same_trials_and_outcomes():
-    from harness.belief import build_belief
-    from harness.physics.simulate import sample_polygons
-    from harness.quality import default_streams
-    from harness.seeding import stream
+    from harness import pipeline
 
     scene = load_scene("marker")
     grasp = [[0.033, -0.014], [0.022, 0.034]]
 
     def run_once():
-        belief = build_belief(scene, stream(3, "marker", 0, "sensor"))
-        shapes_rng, approach_rng, *_ = default_streams(3, "marker")
-        polygons = sample_polygons(belief, 5, shapes_rng)
-        trials = make_trials(resolve(scene), grasp, polygons, approach_rng.standard_normal((5, 2, 2)))
+        inputs = pipeline.posterior_inputs(pipeline.open_cell(scene, resolve(scene), 3, 0, 5), 5)
+        trials = make_trials(resolve(scene), grasp, inputs.polygons, inputs.approach)
         with Runner(batch_size=3) as runner:  # two batches: a world reset in between
             return trials, [repr(r.as_dict()) for r in runner.run(trials)]
 

@@ -13,7 +13,7 @@ from harness.cli import main
 from harness.config import load_config
 from harness.tasks import settings_of
 from harness.physics.simulate import make_trials, truth_polygon
-from harness.physics.trial import Protocol
+from harness.protocol import Protocol
 from harness.scene import load_scene
 from harness.settings import BOUNDS, override_problem, peak_load_factor, resolve
 

@@ -3,6 +3,7 @@ one width tolerance, one line for every storage failure, confined names and path
 
 from __future__ import annotations
 
+import ast
 import errno
 import json
 import os
@@ -181,9 +182,10 @@ def test_a_grasp_wider_than_the_opening_is_rejected_everywhere(tmp_path, capsys)
 
 
 def test_a_planner_calling_sys_exit_in_plan_is_an_outcome(tmp_path):
-    assert _evaluated(tmp_path, "edge_planners:ExitsInPlan") == ([("raised", 0)], 3)
+    # SystemExit is no Exception: the plan's process ends, its status is 'crashed'.
+    assert _evaluated(tmp_path, "edge_planners:ExitsInPlan") == ([("crashed", 0)], 3)
     with sqlite3.connect(tmp_path / "out" / "ledger.sqlite") as db:
-        assert db.execute("SELECT message FROM plans").fetchall() == [("SystemExit: 3",)]
+        assert db.execute("SELECT message FROM plans").fetchall() == [("raised SystemExit: 3",)]
 
 
 # -- 6. storage failures are one line; nothing recorded is lost -----------------------
@@ -285,6 +287,91 @@ def test_a_ledger_with_a_table_dropped_is_one_line(tmp_path, capsys):
         assert "table 'trials' is missing" in _one_line(capsys)
 
 
+@pytest.mark.parametrize(("table", "column", "value", "complaint"), [
+    ("trials", "grip_width", "'abc'", "table trials, row 1 (scene 'disk', realisation 0, planner 'mean-shape', "
+                                      "shapes 'posterior', trial 0), column grip_width: expected a number, got 'abc'"),
+    ("plans", "iterations", "2.5", "column iterations: expected an integer, got 2.5"),
+    ("plans", "trace", "'[1, 2'", "column trace: is not valid JSON"),
+    ("runs", "config", "'not json'", "table runs, row 1 (run 1), column config: is not valid JSON"),
+])
+def test_a_hand_edited_ledger_row_is_one_line_naming_table_row_and_column(tmp_path, capsys, table, column, value,
+                                                                         complaint):
+    config = _config(tmp_path, ["disk"])
+    out = tmp_path / "out"
+    assert main(["eval", str(config), "--out", str(out), "--workers", "1", "--no-report"]) == 0
+    with sqlite3.connect(out / "ledger.sqlite") as db:
+        db.execute(f"UPDATE {table} SET {column} = {value} WHERE rowid = 1")
+    assert (out / "ledger.sqlite").exists()
+    for argv in (["report", str(out)], ["eval", str(config), "--out", str(out)]):
+        capsys.readouterr()
+        assert main(argv) == 2
+        line = _one_line(capsys)
+        assert complaint in line and "changed by hand or is damaged" in line, line
+
+
+# -- issue 30: configs that fit the machine, absolute globs ---------------------------
+
+
+def test_an_absolute_glob_is_read_from_the_root_and_one_that_matches_nothing_is_one_line(tmp_path, capsys):
+    folder = tmp_path / "mine"
+    _scene_file(folder, "a.toml", "disk_a")
+    _scene_file(folder, "b.toml", "disk_b")
+    from harness.config import load_config
+
+    config = load_config(_config(tmp_path, [str(folder / "*.toml")]))
+    assert config.scene_names == ("disk_a", "disk_b")
+    capsys.readouterr()
+    assert main(["eval", str(_config(tmp_path, ["/no-such-folder-here/*.toml"]))]) == 2
+    assert "scenes[0]: '/no-such-folder-here/*.toml' matches no scene" in _one_line(capsys)
+
+
+def _big_grid(tmp_path: Path, size: int) -> Path:
+    return _write_scene(tmp_path / "big.toml", DISK.replace('name = "disk"', 'name = "big_disk"'), size)
+
+
+def _write_scene(path: Path, text: str, size: int) -> Path:
+    import re
+
+    path.write_text(re.sub(r"(?m)^size = .*$", f"size = {size}", text, count=1))
+    return path
+
+
+def test_a_grid_that_cannot_fit_the_machine_is_refused_before_any_work(tmp_path, capsys):
+    scene = _big_grid(tmp_path, 1024)
+    out = tmp_path / "out"
+    assert main(["eval", str(_config(tmp_path, [str(scene)])), "--out", str(out)]) == 2
+    line = _one_line(capsys)
+    assert f"{scene}: grid.size: scene 'big_disk' needs about" in line and "TiB (fitting the GP: 1024 x 1024 grid" \
+        in line and "more than the budget of" in line, line
+    assert not out.exists()  # before any work: no folder, no ledger
+    assert main(["report", str(out)]) == 2 and "no such results folder" in _one_line(capsys)
+    assert main(["plan", str(_write_scene(tmp_path / "mid.toml", DISK, 256)), "--planner", "gp-p"]) == 2
+    assert "grid.size: scene 'disk' needs about" in _one_line(capsys)
+
+
+@pytest.mark.parametrize("argv, where", [
+    (["quality", "disk", "--grasp", "-0.05", "0", "0.05", "0", "--samples", "1000000"], "--samples: scene 'disk'"),
+    (["simulate", "disk", "--grasp", "-0.05", "0", "0.05", "0", "--trials", "1000000"], "--trials: scene 'disk'"),
+])
+def test_draws_that_cannot_fit_the_machine_are_refused_before_any_work(capsys, argv, where):
+    assert main(argv) == 2
+    line = _one_line(capsys)
+    assert where in line and "GiB (judging a plan" in line, line
+
+
+def test_analytic_draws_that_cannot_fit_a_worker_are_refused_naming_the_field(tmp_path, capsys):
+    config = tmp_path / "draws.toml"
+    config.write_text(SMALL.format(scenes='"disk"', planner="mean-shape", params="").replace(
+        "analytic_draws = 20", "analytic_draws = 1000000"))
+    assert main(["eval", str(config), "--out", str(tmp_path / "out"), "--workers", "2"]) == 2
+    line = _one_line(capsys)
+    assert f"{config}: evaluation.analytic_draws: scene 'disk' needs about" in line and "over 2 workers" in line
+    # A budget given on the command line is the one that counts.
+    assert main(["eval", str(_config(tmp_path, ["disk"])), "--out", str(tmp_path / "o2"), "--memory-budget",
+                 "0.1", "--no-report"]) == 2
+    assert "more than the budget of 0.10 GiB per worker (--memory-budget)" in _one_line(capsys)
+
+
 # -- 8. scene names -----------------------------------------------------------------
 
 
@@ -363,9 +450,65 @@ def test_a_symlink_planted_in_the_output_folder_is_replaced_not_followed(tmp_pat
     (["harness.physics.bodies", "harness.physics.gripper", "harness.physics.trial", "harness.physics.simulate"],
      ["planners", "harness.bench", "harness.experiment", "harness.tasks"]),
     (["harness.plots"], ["harness.bench", "harness.experiment", "harness.tasks", "harness.config"]),
+    # Writing and checking a planner needs no physics engine.
+    (["harness.settings", "planners.base", "harness.testing"], ["pybullet", "harness.physics"]),
 ])
 def test_layers_import_only_what_is_below_them(modules, forbidden):
     probe = (f"import importlib, sys\nfor m in {modules!r}: importlib.import_module(m)\n"
              f"print(sorted(m for m in sys.modules if any(m == f or m.startswith(f + '.') for f in {forbidden!r})))")
     out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, cwd=ROOT, check=True).stdout
     assert out.strip() == "[]", out
+
+
+def _imports(path: Path, module: str, modules: set[str]) -> set[str]:
+    """The project's modules that ``module`` (its file ``path``) imports, at its top or
+    inside a function alike, each importing its packages too (a package's __init__ runs
+    first), except the packages that hold ``module`` (a package's __init__ importing its
+    own submodules is no circle)."""
+    package = module if path.name == "__init__.py" else module.rpartition(".")[0]
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            names = [alias.name for alias in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                parts = package.split(".")[:len(package.split(".")) - node.level + 1]
+                base = ".".join(parts + ([base] if base else []))
+            names = [base] + [f"{base}.{alias.name}" for alias in node.names]
+        else:
+            continue
+        for name in names:
+            parts = name.split(".")
+            found.update(".".join(parts[:k]) for k in range(1, len(parts) + 1))
+    own = {".".join(module.split(".")[:k]) for k in range(1, module.count(".") + 2)}
+    return (found & modules) - own
+
+
+def test_no_module_imports_another_in_a_circle():
+    files = {}
+    for root in ("harness", "planners"):
+        for path in (ROOT / root).rglob("*.py"):
+            name = ".".join(path.relative_to(ROOT).with_suffix("").parts)
+            files[name.removesuffix(".__init__")] = path
+    graph = {name: _imports(path, name, set(files)) for name, path in files.items()}
+    # Depth-first search for a back edge; the first circle found is reported.
+    state: dict[str, int] = {}
+    circle: list[str] = []
+
+    def visit(node: str, trail: list[str]) -> bool:
+        state[node] = 1
+        for child in sorted(graph[node]):
+            if state.get(child) == 1:
+                circle.extend(trail[trail.index(child):] + [node, child] if child in trail else [node, child])
+                return True
+            if child not in state and visit(child, trail + [node]):
+                return True
+        state[node] = 2
+        return False
+
+    for start in sorted(graph):
+        if start not in state and visit(start, []):
+            break
+    assert not circle, " -> ".join(circle)
+    assert len(graph) > 40 and sum(map(len, graph.values())) > 100  # the graph was really read

@@ -400,7 +400,7 @@ def physics(grasps_per_scene: int = PHYSICS_GRASPS_PER_SCENE, seed: int = 0) -> 
     no early stop) on the same trials, and the outcome agreement with a 4x finer step."""
     from harness.physics.simulate import outcome_counts
     from harness.bench.physics_study import agreement, confusion, library_trials, run_batched, run_naive
-    from harness.physics.trial import Protocol
+    from harness.protocol import Protocol
 
     trials = library_trials(grasps_per_scene, seed).trials
     protocol = Protocol()

@@ -17,7 +17,8 @@ import numpy as np
 
 from harness.belief import build_belief
 from harness.physics.simulate import make_trials, truth_polygon
-from harness.physics.trial import Protocol, Runner, Trial, TrialResult
+from harness.physics.trial import Runner, Trial, TrialResult
+from harness.protocol import Protocol
 from harness.scene import library_names, load_scene
 from harness.settings import resolve
 from harness.seeding import stream

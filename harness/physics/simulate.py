@@ -16,10 +16,9 @@ from dataclasses import dataclass
 import numpy as np
 from shapely.geometry import Polygon
 
-from harness.belief import Belief
 from harness.canonical import canonical
 from harness.geometry import largest_region
-from harness.physics.bodies import field_polygon, simplified_outline
+from harness.physics.bodies import simplified_outline
 from harness.physics.gripper import GripperAdapter, GripperSpec
 from harness.physics.trial import OUTCOMES, Trial
 from harness.quality import as_starts, executed_starts, wilson_interval
@@ -32,12 +31,6 @@ SHAPE_SOURCES = ("truth", "posterior")
 def truth_polygon(scene: Scene) -> Polygon:
     """The true shape's largest region, canonical and simplified like a sample's."""
     return simplified_outline(largest_region(scene.shape), scene.grid.cell)
-
-
-def sample_polygons(belief: Belief, n: int, rng: np.random.Generator) -> list[Polygon]:
-    """n posterior shape samples as polygons (empty where a sample has no inside)."""
-    fields = belief.sample(n, rng).values
-    return [field_polygon(f, belief.grid) for f in fields]
 
 
 def make_trials(settings: GraspSettings, grasp, polygons: list[Polygon], approach: np.ndarray,

@@ -1,4 +1,4 @@
-"""Physics trials: the protocol, one trial's state machine, and the runner that steps
+"""Physics trials in pybullet: one trial's state machine, and the runner that steps
 a batch of trials together in one pybullet world.
 
 A trial: the object (a polygon extruded to a prism) lies on the table; the open jaws
@@ -19,7 +19,7 @@ fixed by their order in the list, never by the number of workers.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
 from typing import Callable, Sequence
@@ -31,6 +31,7 @@ from shapely.geometry import Polygon
 
 from harness.physics.bodies import create_body
 from harness.physics.gripper import GripperAdapter
+from harness.protocol import Protocol
 
 OUTCOMES = ("success", "approach_collision", "no_contact", "slipped", "dropped", "unstable", "empty_shape")
 FAILURES = OUTCOMES[1:]
@@ -42,43 +43,6 @@ SLOT_SPACING = 2.0
 MAX_BATCH = 64
 #: The floating base's constraint may apply up to this force (N).
 BASE_FORCE = 2000.0
-
-
-@dataclass(frozen=True)
-class Protocol:
-    """Every constant of a trial (SI units). The time step and solver iterations were
-    chosen by the fidelity study in docs/physics.md."""
-
-    time_step: float = 1.0 / 480.0
-    solver_iterations: int = 50
-    lift_height: float = 0.10
-    lift_time: float = 0.4           # minimum-jerk profile: peak acceleration 5.77 h / T^2 (3.6 m/s^2)
-    hold_time: float = 0.1
-    shake_time: float = 0.5          # one full circle at 2 Hz
-    shake_frequency: float = 2.0     # Hz
-    shake_amplitude: float = 0.02    # m, in the plane, circular, under a sin^2 envelope
-    shake_turn: float = 0.25         # rad, about the vertical through the grasp centre
-    table_friction: float = 0.5      # the object carries 1, so this is object-table friction
-    friction_anchor: bool = True     # Bullet's friction anchors: static friction without creep
-    cone_friction: bool = True       # the exact Coulomb cone; False: Bullet's pyramid (faster, anisotropic)
-    table_hull: bool = True          # the object meets the table through its convex hull's foot, not its pieces
-    check_interval: float = 1.0 / 60.0  # s between contact checks while lifting and shaking
-    held_distance: float = 0.001     # m: a jaw this close to the object touches it
-    lost_distance: float = 0.005     # m: an object this far from both jaws ...
-    lost_time: float = 0.03          # s: ... for this long is lost
-    stall_fraction: float = 0.05     # a jaw slower than this fraction of closing speed ...
-    stall_time: float = 0.02         # ... for this long has stalled
-    closing_slack: float = 0.5       # s allowed beyond the time to close fully
-    max_speed: float = 10.0          # m/s: faster means the simulation blew up
-    max_spin: float = 200.0          # rad/s: likewise
-    skip_free_travel: bool = True    # start the jaws SKIP_MARGIN short of the first contact
-
-    def steps(self, seconds: float) -> int:
-        return max(1, int(round(seconds / self.time_step)))
-
-    def finer(self, factor: int) -> "Protocol":
-        """The same protocol with a time step ``factor`` times smaller."""
-        return replace(self, time_step=self.time_step / factor)
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,44 @@
+"""The trial protocol: every constant of a physics trial (time step, solver iterations,
+lift, hold, shake, the contact checks), a pure value below the grasp settings and the
+engines that run it."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+
+@dataclass(frozen=True)
+class Protocol:
+    """Every constant of a trial (SI units). The time step and solver iterations were
+    chosen by the fidelity study in docs/physics.md."""
+
+    time_step: float = 1.0 / 480.0
+    solver_iterations: int = 50
+    lift_height: float = 0.10
+    lift_time: float = 0.4           # minimum-jerk profile: peak acceleration 5.77 h / T^2 (3.6 m/s^2)
+    hold_time: float = 0.1
+    shake_time: float = 0.5          # one full circle at 2 Hz
+    shake_frequency: float = 2.0     # Hz
+    shake_amplitude: float = 0.02    # m, in the plane, circular, under a sin^2 envelope
+    shake_turn: float = 0.25         # rad, about the vertical through the grasp centre
+    table_friction: float = 0.5      # the object carries 1, so this is object-table friction
+    friction_anchor: bool = True     # Bullet's friction anchors: static friction without creep
+    cone_friction: bool = True       # the exact Coulomb cone; False: Bullet's pyramid (faster, anisotropic)
+    table_hull: bool = True          # the object meets the table through its convex hull's foot, not its pieces
+    check_interval: float = 1.0 / 60.0  # s between contact checks while lifting and shaking
+    held_distance: float = 0.001     # m: a jaw this close to the object touches it
+    lost_distance: float = 0.005     # m: an object this far from both jaws ...
+    lost_time: float = 0.03          # s: ... for this long is lost
+    stall_fraction: float = 0.05     # a jaw slower than this fraction of closing speed ...
+    stall_time: float = 0.02         # ... for this long has stalled
+    closing_slack: float = 0.5       # s allowed beyond the time to close fully
+    max_speed: float = 10.0          # m/s: faster means the simulation blew up
+    max_spin: float = 200.0          # rad/s: likewise
+    skip_free_travel: bool = True    # start the jaws SKIP_MARGIN short of the first contact
+
+    def steps(self, seconds: float) -> int:
+        return max(1, int(round(seconds / self.time_step)))
+
+    def finer(self, factor: int) -> "Protocol":
+        """The same protocol with a time step ``factor`` times smaller."""
+        return replace(self, time_step=self.time_step / factor)
