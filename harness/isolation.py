@@ -58,16 +58,16 @@ def call(fn, *args, deadline_s: float | None = None, memory_bytes: int | None = 
         os.close(read_fd)
         _run_child(fn, args, write_fd, caller, memory_bytes)
     os.close(write_fd)
-    reaped = False
+    status = None
     try:
-        data, timed_out = _read_until(read_fd, None if deadline_s is None else start + deadline_s)
+        data, timed_out, status = _collect(read_fd, pid, None if deadline_s is None else start + deadline_s)
         if timed_out:
             os.kill(pid, signal.SIGKILL)
-        _, status = os.waitpid(pid, 0)
-        reaped = True
+        if status is None:
+            _, status = os.waitpid(pid, 0)
     finally:
         os.close(read_fd)
-        if not reaped:  # interrupted (Ctrl-C) or failed while waiting: leave nothing behind
+        if status is None:  # interrupted (Ctrl-C) or failed while waiting: leave nothing behind
             _kill_and_reap(pid)
     seconds = time.perf_counter() - start
     if timed_out:
@@ -134,20 +134,27 @@ def _run_child(fn, args, write_fd: int, caller: int, memory_bytes: int | None) -
         os._exit(code)
 
 
-def _read_until(fd: int, deadline: float | None) -> tuple[bytes, bool]:
-    """Everything written to ``fd`` until its end, or (what came, True) at the deadline."""
+def _collect(fd: int, pid: int, deadline: float | None) -> tuple[bytes, bool, int | None]:
+    """What process ``pid`` writes to ``fd``, until the pipe ends or the process does (a
+    process it started may hold the pipe open after it), or the deadline passes: (the
+    bytes, whether the deadline passed, the exit status if the process was reaped)."""
     chunks = []
     while True:
-        wait = None if deadline is None else deadline - time.perf_counter()
-        if wait is not None and wait <= 0:
-            return b"".join(chunks), True
-        ready, _, _ = select.select([fd], [], [], wait)
-        if not ready:
+        wait = 0.2 if deadline is None else min(0.2, deadline - time.perf_counter())
+        if wait <= 0:
+            return b"".join(chunks), True, None
+        if select.select([fd], [], [], wait)[0]:
+            chunk = os.read(fd, 1 << 16)
+            if not chunk:
+                return b"".join(chunks), False, None
+            chunks.append(chunk)
             continue
-        chunk = os.read(fd, 1 << 16)
-        if not chunk:
-            return b"".join(chunks), False
-        chunks.append(chunk)
+        done, status = os.waitpid(pid, os.WNOHANG)
+        if done:  # it wrote everything before it ended: take what the pipe still holds
+            os.set_blocking(fd, False)
+            while select.select([fd], [], [], 0)[0] and (chunk := os.read(fd, 1 << 16)):
+                chunks.append(chunk)
+            return b"".join(chunks), False, status
 
 
 def _kill_and_reap(pid: int) -> None:

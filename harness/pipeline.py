@@ -71,6 +71,7 @@ def plan(cell: Cell, label: str, name: str, params: dict, budget: float | None,
     the planner's faults; they are the row's status."""
     from harness.seeding import stream
     from planners.base import Problem
+    from planners.registry import builtins
 
     row = {"scene": cell.scene.name, "realisation": cell.realisation, "planner": label, "planner_name": name,
            "params": json.dumps(params, sort_keys=True), "status": "error", "executed": 0, "message": "",
@@ -78,6 +79,7 @@ def plan(cell: Cell, label: str, name: str, params: dict, budget: float | None,
            "iterations": 0, "evaluations": 0, "trace": "[]"}
     problem = Problem(cell.belief, cell.settings, time_budget_s=budget)
     rng = stream(cell.seed, cell.scene.name, cell.realisation, "planner", label)
+    builtins()  # imported here once, not in every plan's process; plugins load there only
     outcome = isolation.call(_plan_in_child, name, params, problem, rng,
                              deadline_s=None if budget is None else deadline_s(budget), memory_bytes=memory_bytes)
     if outcome.kind != "returned":
@@ -112,9 +114,9 @@ def _plan_in_child(name: str, params: dict, problem, rng) -> dict:
     from planners.base import STATUSES, Plan
     from planners.registry import make_planner
 
+    planner = make_planner(name, params)
     before = fingerprint(problem, contents=False)
     start = time.perf_counter()
-    planner = make_planner(name, params)
     plan = planner.plan(problem, rng)
     elapsed = time.perf_counter() - start
     changed = changes(before, fingerprint(problem, contents=False))
@@ -182,6 +184,11 @@ class TrialInputs:
     polygons: list
     approach: np.ndarray
     friction: np.ndarray
+
+    def part(self, trials: slice) -> "TrialInputs":
+        """The inputs of some of the trials (one shared polygon stays shared)."""
+        polygons = self.polygons if len(self.polygons) == 1 else self.polygons[trials]
+        return TrialInputs(polygons, self.approach[trials], self.friction[trials])
 
 
 def posterior_inputs(cell: Cell, trials: int) -> TrialInputs:

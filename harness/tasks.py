@@ -25,6 +25,7 @@ from functools import lru_cache
 import numpy as np
 
 from harness.config import ExperimentConfig
+from harness.pipeline import TrialInputs
 from harness.scene import load_scene
 
 NO_PLAN = "no_plan"              # trial outcome when the plan gave nothing to execute
@@ -62,13 +63,13 @@ class CellResult:
     realisation: int
     plans: list
     analytic: list
-    posterior: object
-    truth: object
+    posterior: TrialInputs
+    truth: TrialInputs
     seconds: float
 
 
 def run_cell(config: ExperimentConfig, path: str, realisation: int, labels: tuple[str, ...],
-             plan_memory: int | None = None) -> CellResult:
+             plan_memory: float | None = None) -> CellResult:
     """Belief, plans of ``labels`` (each plan's process may grow by ``plan_memory``
     bytes), their analytic P_F, and the trials' shapes and noise, with one BLAS thread:
     the workers are the parallelism. On 2 cores, two workers with two BLAS threads each
@@ -81,7 +82,7 @@ def run_cell(config: ExperimentConfig, path: str, realisation: int, labels: tupl
 
 
 def _cell(config: ExperimentConfig, path: str, realisation: int, labels: tuple[str, ...],
-          plan_memory: int | None) -> CellResult:
+          plan_memory: float | None) -> CellResult:
     from harness import pipeline
 
     start = time.perf_counter()
@@ -172,8 +173,6 @@ def batches_of(config: ExperimentConfig, path: str, cell: CellResult, plan: dict
             if not plan["executed"]:
                 rows.extend(_trial_row(key, i, NO_PLAN) for i in indices if (label, shapes, i) not in done)
                 continue
-            sl = slice(indices[0], indices[-1] + 1)
-            inputs = cell.posterior if shapes == "posterior" else cell.truth
-            polygons = inputs.polygons[sl] if len(inputs.polygons) > 1 else inputs.polygons
-            batches.append(replace(key, polygons=polygons, approach=inputs.approach[sl], friction=inputs.friction[sl]))
+            part = (cell.posterior if shapes == "posterior" else cell.truth).part(slice(indices[0], indices[-1] + 1))
+            batches.append(replace(key, polygons=part.polygons, approach=part.approach, friction=part.friction))
     return batches, rows

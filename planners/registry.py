@@ -4,6 +4,7 @@ defaults and the planner's BOUNDS (the one check for configs and ``--param``).""
 
 from __future__ import annotations
 
+import functools
 import importlib
 import inspect
 import math
@@ -46,13 +47,16 @@ def class_problem(cls) -> str | None:
     return None
 
 
+@functools.cache
+def builtins() -> dict:
+    """The built-in planners by name (their modules imported once per process)."""
+    return {cls.name: cls for cls in map(_load, BUILTINS)}
+
+
 def available() -> tuple[dict, dict]:
     """(planners by name, plugins that failed to load: entry point -> error)."""
-    found: dict = {}
+    found: dict = dict(builtins())
     broken: dict = {}
-    for target in BUILTINS:
-        cls = _load(target)
-        found[cls.name] = cls
     for ep in entry_points(group=ENTRY_POINT_GROUP):
         try:
             cls = ep.load()
@@ -76,6 +80,8 @@ def planner_class(name: str) -> type:
         if problem:
             raise InputError("--planner", None, f"planner '{name}': {problem}")
         return cls
+    if name in builtins():  # a built-in wins over a plugin of its name: no need to load the plugins
+        return builtins()[name]
     found, broken = available()
     if name not in found:
         extra = f"; {name} failed to load: {broken[name]}" if name in broken else ""
