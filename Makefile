@@ -35,11 +35,16 @@ eval: setup
 eval-quick: setup
 	$(BIN)/gpis-harness eval experiments/quick.toml
 
+# Test files run in parallel on up to 4 processes (pytest-xdist; one per core here): each
+# file on one process, so its module fixtures are built once. On this 2-core machine the
+# suite took 319 s this way against about 555 s in one process (2026-11-25).
+PYTEST := $(BIN)/python -m pytest -q -n auto --maxprocesses 4 --dist loadfile
+
 test: setup
-	$(BIN)/python -m pytest -q
+	$(PYTEST)
 
 test-all: setup
-	$(BIN)/python -m pytest -q --runslow
+	$(PYTEST) --runslow
 
 scenes: setup
 	$(BIN)/gpis-harness scenes render --out results/scenes
