@@ -81,9 +81,9 @@ def call(fn, *args, deadline_s: float | None = None, memory_bytes: int | None = 
 
 def die_with(pid: int) -> None:
     """End this process (exit code 1) as soon as process ``pid`` ends, from a daemon
-    thread: a pidfd where Linux has one (at once), else a poll of the parent's id every
-    0.2 s. For processes whose life only makes sense while ``pid`` lives (the pool's
-    workers, an isolated call)."""
+    thread: a pidfd where Linux has one (at once), else a poll every 0.2 s. For processes
+    whose life only makes sense while ``pid`` lives (the pool's workers, an isolated
+    call)."""
     try:
         handle = os.pidfd_open(pid)
     except (AttributeError, OSError):
@@ -95,7 +95,7 @@ def die_with(pid: int) -> None:
         if handle is not None:
             select.select([handle], [], [])  # readable once the process has ended
         else:
-            while os.getppid() == pid:
+            while _alive(pid):
                 time.sleep(0.2)
         os._exit(1)
 
@@ -185,8 +185,8 @@ def _alive(pid: int) -> bool:
         os.kill(pid, 0)
     except ProcessLookupError:
         return False
-    except PermissionError:
-        return True
+    except PermissionError:  # alive, someone else's
+        pass
     return True
 
 

@@ -269,6 +269,34 @@ def test_an_isolated_call_writes_into_its_own_copy_only():
     assert array[0] == 0.0
 
 
+def _watch_a_process_that_ends(seconds: float, pidfd: bool) -> None:
+    """In an isolated call: start a process that is not this one's child (init adopts and
+    reaps it: no zombie to look alive) and ends after ``seconds``, watch it with
+    die_with, and sleep: the call ends only if die_with ends it."""
+    read_fd, write_fd = os.pipe()
+    middle = os.fork()
+    if middle == 0:
+        watched = os.fork()
+        if watched == 0:
+            time.sleep(seconds)
+            os._exit(0)
+        os.write(write_fd, str(watched).encode())
+        os._exit(0)
+    os.waitpid(middle, 0)
+    watched = int(os.read(read_fd, 32))
+    if not pidfd:
+        del os.pidfd_open  # this process's own copy of the module: the polling fallback
+    isolation.die_with(watched)
+    time.sleep(10)
+
+
+@pytest.mark.parametrize("pidfd", [True, False], ids=["pidfd", "polling"])
+def test_a_process_ends_when_the_process_it_watches_ends(pidfd):
+    outcome = isolation.call(_watch_a_process_that_ends, 0.5, pidfd, deadline_s=8)
+    assert outcome.kind == "crashed" and outcome.message == "exited with code 1", outcome
+    assert 0.4 < outcome.seconds < 3.0
+
+
 def test_memory_beyond_the_cap_is_a_crash_of_the_call_only():
     outcome = isolation.call(np.ones, 2**30 // 8 * 2, memory_bytes=2**30)  # 2 GiB against a 1 GiB cap
     assert outcome.kind == "crashed" and "ran out of memory" in outcome.message
