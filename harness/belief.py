@@ -142,10 +142,10 @@ def make_gp(scene: Scene) -> GPIS:
     )
 
 
-def fit_belief(scene: Scene, observations: Observations) -> Belief:
-    """Fit the scene's GPIS to observations (on its active set, when enabled)."""
+def fitted_readings(scene: Scene, observations: Observations) -> tuple[np.ndarray, Observations, np.ndarray | None]:
+    """What the scene's GPIS is fitted to: the indices of the active readings, those
+    readings, and their gradients (NaN where unused; None without gradients)."""
     s = scene.gpis
-    gp = make_gp(scene)
     if s.active_set:
         active = select_active_set(observations.points, observations.values, observations.noise_var,
                                    s.active_band, s.active_spacing)
@@ -153,14 +153,23 @@ def fit_belief(scene: Scene, observations: Observations) -> Belief:
         active = np.arange(len(observations))
     obs = observations.subset(active)
     if not s.use_gradients:
-        gp.fit(obs.points, obs.values, obs.noise_var)
-        return Belief(scene, observations, gp, active)
+        return active, obs, None
     gradients = obs.gradients
     if s.active_set:
         # Gradients far from the surface are central differences of a flat, clipped
         # field; measured to change the posterior near the surface by < 0.05 mm.
         gradients = np.where((np.abs(obs.values) <= s.active_band)[:, None], gradients, np.nan)
-    gp.fit(obs.points, obs.values, obs.noise_var, gradients, obs.gradient_noise_var)
+    return active, obs, gradients
+
+
+def fit_belief(scene: Scene, observations: Observations) -> Belief:
+    """Fit the scene's GPIS to observations (on its active set, when enabled)."""
+    gp = make_gp(scene)
+    active, obs, gradients = fitted_readings(scene, observations)
+    if gradients is None:
+        gp.fit(obs.points, obs.values, obs.noise_var)
+    else:
+        gp.fit(obs.points, obs.values, obs.noise_var, gradients, obs.gradient_noise_var)
     return Belief(scene, observations, gp, active)
 
 

@@ -86,23 +86,14 @@ def cell_need(scene, seed: int, realisation: int, draws: int, shape_samples: int
     """The estimated peak of one cell (see the module docstring): the sensor reads the
     scene with the cell's own stream, so D is the count the fit will see. When fitting
     alone exceeds ``budget``, the basis (seconds on a large grid) is not computed."""
-    from harness.belief import observe_scene
-    from harness.gpis import grid_basis_rank, select_active_set
+    from harness.belief import fitted_readings, observe_scene
+    from harness.gpis import grid_basis_rank
     from harness.seeding import stream
 
     observations = observe_scene(scene, stream(seed, scene.name, realisation, "sensor"))
+    active, _, gradients = fitted_readings(scene, observations)  # as the fit takes them
+    scalars = len(active) + (0 if gradients is None else 2 * int((~np.isnan(gradients).any(axis=1)).sum()))
     s = scene.gpis
-    if s.active_set:
-        active = select_active_set(observations.points, observations.values, observations.noise_var,
-                                   s.active_band, s.active_spacing)
-    else:
-        active = np.arange(len(observations))
-    scalars = len(active)
-    if s.use_gradients:  # as harness.belief.fit_belief: gradient readings near the surface, where observed
-        observed = ~np.isnan(observations.gradients[active]).any(axis=1)
-        if s.active_set:
-            observed &= np.abs(observations.values[active]) <= s.active_band
-        scalars += 2 * int(observed.sum())
     fitting = 24.0 * scalars**2 + PROCESS_BYTES
     if budget is not None and fitting > budget:
         return Need(fitting, "fitting the GP", scene.grid.size, scalars, None, draws, shape_samples)
