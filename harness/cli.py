@@ -13,6 +13,7 @@ import traceback
 from pathlib import Path
 
 from harness.errors import InputError
+from harness.protocol import ENGINES
 
 PROG = "gpis-harness"
 
@@ -168,7 +169,8 @@ def _simulate(args) -> int:
     from harness import pipeline
     from harness.memory import check_single
     from harness.physics.simulate import SimulationSummary, make_trials
-    from harness.physics.trial import Runner
+    from harness.physics.engines import make_runner
+    from harness.protocol import Protocol
 
     scene, grasp, settings = _scene_and_grasp(args)
     if args.frames is not None and Path(args.frames).exists() and not Path(args.frames).is_dir():
@@ -182,13 +184,14 @@ def _simulate(args) -> int:
         inputs = pipeline.truth_inputs(scene, args.seed, 0, args.trials)
     trials = make_trials(settings, grasp, inputs.polygons, inputs.approach, inputs.friction)
     start = time.perf_counter()
-    with Runner() as runner, tqdm(total=len(trials), unit="trial", disable=None, file=sys.stderr) as bar:
+    bar = tqdm(total=len(trials), unit="trial", disable=None, file=sys.stderr)
+    with make_runner(Protocol.of(args.engine)) as runner, bar:
         results = runner.run(trials, frames=Path(args.frames) if args.frames else None, progress=bar.update)
     summary = SimulationSummary(tuple(results), time.perf_counter() - start)
     out = summary.as_dict()
     if args.json:
         print(json.dumps(out | {"scene": scene.name, "grasp": {"g1": list(grasp.g1), "g2": list(grasp.g2)},
-                                "shapes": args.shapes, "sigma_g": settings.sigma_g,
+                                "shapes": args.shapes, "engine": args.engine, "sigma_g": settings.sigma_g,
                                 "friction": settings.friction, "friction_spread": settings.friction_spread,
                                 "seed": args.seed}))
     else:
@@ -196,7 +199,7 @@ def _simulate(args) -> int:
         print(f"{scene.name} ({args.shapes}): success {out['successes']}/{out['trials']} = "
               f"{out['success_rate']:.3f} (95% CI {out['ci_low']:.3f} to {out['ci_high']:.3f}), "
               f"sigma_g = {settings.sigma_g:g} m, friction = {settings.friction:g}")
-        print(f"outcomes: {counts}; {out['trials_per_s']:.1f} trials/s")
+        print(f"outcomes: {counts}; {out['trials_per_s']:.1f} trials/s in {args.engine}")
         if args.frames:
             print(f"frames of the first trial in {args.frames}")
     return 0
@@ -210,12 +213,14 @@ def _eval(args) -> int:
     from harness.outputs import command_line, folder_lock, output_folder, storage
 
     config = load_config(args.config)
+    if args.engine is not None:
+        config = config.with_engine(args.engine)
     warning = check_scheduler(args.scheduler)  # before any folder or ledger exists
     if warning:
         print(f"{PROG}: warning: {warning}", file=sys.stderr)
     workers = args.workers or os.cpu_count() or 1
     plan_memory = check_config(config, workers, args.memory_budget)
-    out = output_folder(Path(args.out) if args.out else Path("results") / config.name)
+    out = output_folder(Path(args.out) if args.out else Path("results") / config.name)  # name-ENGINE if given
 
     def log(line: str) -> None:
         print(line, file=sys.stderr, flush=True)
@@ -258,7 +263,7 @@ def _print_report(out: Path, figures: bool) -> None:
 def _compare(args) -> int:
     from harness.compare import as_json, as_markdown, compare
 
-    result = compare(Path(args.dir_a), Path(args.dir_b))
+    result = compare(Path(args.dir_a), Path(args.dir_b), engines=args.engines)
     print(json.dumps(as_json(result), default=str) if args.json else as_markdown(result))
     return 0
 
@@ -344,9 +349,10 @@ def _bench(args) -> int:
 
     results = bench.run(args.which, exact_max_mb=args.exact_max_mb, sizes=args.sizes, seeds=args.seeds,
                         scenes=args.scenes, candidates=args.candidates, first_seed=args.first_seed,
-                        shared_draws=args.shared_draws, prior_draws=args.prior_draws)
+                        shared_draws=args.shared_draws, prior_draws=args.prior_draws, out=args.out,
+                        workers=args.workers)
     if args.json:
-        print(json.dumps(results, indent=2))
+        print(json.dumps(results, indent=2, default=str))
     else:
         print(bench.format_results(results))
     return 0
@@ -396,7 +402,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     p.set_defaults(func=_quality)
 
-    p = sub.add_parser("simulate", help="physics trials of one grasp in pybullet")
+    p = sub.add_parser("simulate", help="physics trials of one grasp (pybullet or MuJoCo)")
     p.add_argument("scene", help="library name or path to a scene file")
     p.add_argument("--grasp", **_GRASP)
     p.add_argument("--trials", type=_positive_int, default=100, help="number of trials (default 100)")
@@ -405,6 +411,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_problem_options(p)
     p.add_argument("--frames", metavar="DIR", default=None,
                    help="write PNG snapshots of each phase of the first trial into DIR")
+    p.add_argument("--engine", choices=ENGINES, default=ENGINES[0],
+                   help="the physics engine (default pybullet; docs/physics.md)")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     p.set_defaults(func=_simulate)
 
@@ -435,6 +443,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--memory-budget", type=_positive_number, default=None, metavar="GIB",
                    help="memory one worker may use, GiB (default: 75%% of this machine's over the workers); "
                         "a config whose largest cell needs more is refused before any work")
+    p.add_argument("--engine", choices=ENGINES, default=None,
+                   help="simulate in this engine instead of the config's [physics] engine; the run is named "
+                        "NAME-ENGINE (its own results folder by default)")
     p.add_argument("--fresh", action="store_true", help="discard this experiment's ledger rows and start over")
     p.add_argument("--no-report", action="store_true", help="skip the report at the end")
     p.set_defaults(func=_eval)
@@ -447,12 +458,14 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("compare", help="paired comparison of two runs of one experiment (B - A)")
     p.add_argument("dir_a", metavar="DIR_A", help="results folder of run A (the reference)")
     p.add_argument("dir_b", metavar="DIR_B", help="results folder of run B (the same experiment, changed)")
+    p.add_argument("--engines", action="store_true",
+                   help="a cross-engine comparison: refuse unless the runs differ in the physics engine alone")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     p.set_defaults(func=_compare)
 
     bench = sub.add_parser("bench", help="benchmarks, measured as ratios in one run")
     bench.add_argument("which", nargs="?", default="all",
-                       choices=["sampling", "planning", "quality", "physics", "lift", "bandit", "all"])
+                       choices=["sampling", "planning", "quality", "physics", "lift", "bandit", "engines", "all"])
     bench.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     bench.add_argument("--exact-max-mb", type=float, default=2500.0,
                        help="skip the dense exact sampler when its covariance exceeds this (default 2500)")
@@ -479,6 +492,11 @@ def build_parser() -> argparse.ArgumentParser:
                        help="also run Thompson sampling with each of these values of gp-bandit's "
                             "prior_draws (comma-separated; labelled thompson-prior-VALUE): a sensitivity "
                             "study of the model prior's weight")
+    bench.add_argument("--out", default="results/engines",
+                       help="bench engines: the folder of its two runs, its frames and study.json "
+                            "(default results/engines)")
+    bench.add_argument("--workers", type=_positive_int, default=None,
+                       help="bench engines: worker processes of each run (default: one per core)")
     bench.set_defaults(func=_bench)
     return parser
 

@@ -33,9 +33,13 @@ SHAPES = ("posterior", "truth")
 GRASP = ["g1x", "g1y", "g2x", "g2y"]
 
 
-def compare(dir_a: Path, dir_b: Path) -> dict:
-    """The paired comparison of the latest experiments in two results folders (B - A)."""
+def compare(dir_a: Path, dir_b: Path, engines: bool = False) -> dict:
+    """The paired comparison of the latest experiments in two results folders (B - A).
+    ``engines``: a cross-engine comparison, refused unless the runs differ in the physics
+    engine and in nothing else (:func:`check_engines_only`)."""
     a, b = load(Path(dir_a)), load(Path(dir_b))
+    if engines:
+        check_engines_only(a, b, dir_a, dir_b)
     for name in PAIRING_FIELDS:
         va, vb = a["config"].get(name), b["config"].get(name)
         if va != vb:
@@ -66,6 +70,46 @@ def compare(dir_a: Path, dir_b: Path) -> dict:
         "planner_shifts": _planner_shifts(trials, a["config"], planners, rng),
         "outcomes": pd.crosstab(trials.outcome_a, trials.outcome_b, rownames=["A"], colnames=["B"]),
     }
+
+
+def check_engines_only(a: dict, b: dict, dir_a, dir_b) -> None:
+    """InputError unless the two runs' configs (scene contents included, by the config
+    hash less the engine) differ in ``[physics] engine`` alone: then every plan, shape
+    sample, approach draw and friction draw is the same, and a difference is the
+    simulator's."""
+    engine_a, engine_b = ((c["config"].get("physics") or {}).get("engine", "pybullet") for c in (a, b))
+    if engine_a == engine_b:
+        raise InputError(str(dir_b), "config.physics.engine",
+                         f"is {engine_b} in both runs: a cross-engine comparison needs two engines")
+    differences = config_differences(a["config"], b["config"])
+    physics = differences.pop("physics", None)
+    if physics is not None:
+        rest = [{k: v for k, v in (p or {}).items() if k != "engine"} for p in physics]
+        if rest[0] != rest[1]:
+            differences["physics"] = rest
+    differences.pop("batch_size", None)  # how trials are grouped, no result (tested for both engines)
+    if differences:
+        name = sorted(differences)[0]
+        raise InputError(str(dir_b), f"config.{name}",
+                         f"is {differences[name][1]!r} here and {differences[name][0]!r} in {dir_a}: "
+                         "a cross-engine comparison needs runs that differ in the engine alone")
+    hashes = [_content_hash(run) for run in (a, b)]
+    if None not in hashes and hashes[0] != hashes[1]:
+        raise InputError(str(dir_b), "config.scenes", f"a scene file's content differs from {dir_a}'s")
+
+
+def _content_hash(run: dict) -> str | None:
+    """The hash of a run's config less its engine, the scene files' content included;
+    None when a scene file is no longer where the run read it (the count of identical
+    plans then shows an edit)."""
+    from harness.config import ExperimentConfig
+
+    config = dict(run["config"])
+    config["physics"] = {k: v for k, v in (config.get("physics") or {}).items() if k != "engine"}
+    try:
+        return ExperimentConfig.from_dict(config).hash
+    except OSError:
+        return None
 
 
 def config_differences(a: dict, b: dict) -> dict:

@@ -15,6 +15,7 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 from harness.errors import InputError
+from harness.protocol import ENGINES
 from harness.scene import LIBRARY, library_names, load_scene, resolve
 from harness.toml_table import Table, read_toml
 
@@ -90,9 +91,26 @@ class ExperimentConfig:
                       "planners": tuple(PlannerEntry(**p) for p in d["planners"])})
 
     def protocol(self):
+        """The trial protocol: the engine's own (its time step and iterations), then the
+        config's overrides."""
         from harness.protocol import Protocol
 
-        return replace(Protocol(), **self.physics)
+        physics = dict(self.physics)
+        return Protocol.of(physics.pop("engine", "pybullet"), **physics)
+
+    @property
+    def engine(self) -> str:
+        return self.physics.get("engine", ENGINES[0])
+
+    def with_engine(self, engine: str) -> "ExperimentConfig":
+        """The same experiment in another engine, named NAME-ENGINE (``eval --engine``);
+        itself when it already runs there."""
+        if engine == self.engine:
+            return self
+        physics = {k: v for k, v in self.physics.items() if k != "engine"}
+        if engine != ENGINES[0]:
+            physics["engine"] = engine
+        return replace(self, name=f"{self.name}-{engine}", physics=physics)
 
     def cells(self) -> list[tuple[str, str, int]]:
         """(scene file, scene name, realisation) of every cell, in order."""
@@ -153,6 +171,9 @@ def parse_config(data: dict, source: str, base_dir: Path, default_name: str = "e
     for key in ("cone_friction", "table_hull"):
         if key in phys.data:
             protocol[key] = phys.boolean(key)
+    engine = phys.string("engine", ENGINES[0], choices=ENGINES)
+    if engine != ENGINES[0]:  # the default engine is left out, so configs written before engines keep their hash
+        protocol["engine"] = engine
     batch = phys.integer("batch_size", 16, lo=1, hi=64)
     phys.finish()
 

@@ -15,7 +15,7 @@ def environment() -> dict:
     from harness.provenance import reproducibility
 
     versions = {}
-    for pkg in ("gpis-harness", "numpy", "scipy", "osqp", "pandas", "pybullet", "shapely", "matplotlib"):
+    for pkg in ("gpis-harness", "numpy", "scipy", "osqp", "pandas", "pybullet", "mujoco", "shapely", "matplotlib"):
         try:
             versions[pkg] = version(pkg)
         except PackageNotFoundError:

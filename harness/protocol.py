@@ -1,6 +1,6 @@
-"""The trial protocol: every constant of a physics trial (time step, solver iterations,
-lift, hold, shake, the contact checks), a pure value below the grasp settings and the
-engines that run it."""
+"""The trial protocol: every constant of a physics trial (the engine, time step, solver
+iterations, lift, hold, shake, the contact checks), a pure value below the grasp
+settings and the engines that run it."""
 
 from __future__ import annotations
 
@@ -9,9 +9,13 @@ from dataclasses import dataclass, replace
 
 @dataclass(frozen=True)
 class Protocol:
-    """Every constant of a trial (SI units). The time step and solver iterations were
-    chosen by the fidelity study in docs/physics.md."""
+    """Every constant of a trial (SI units). ``engine`` names the simulator
+    (harness.physics.trial.ENGINES); the time step and solver iterations are the
+    engine's own, chosen by its fidelity study in docs/physics.md (make one with
+    :meth:`of`). ``friction_anchor`` is Bullet's alone; ``cone_friction`` chooses the
+    elliptic cone over the pyramid in MuJoCo too."""
 
+    engine: str = "pybullet"
     time_step: float = 1.0 / 480.0
     solver_iterations: int = 50
     lift_height: float = 0.10
@@ -36,9 +40,26 @@ class Protocol:
     max_spin: float = 200.0          # rad/s: likewise
     skip_free_travel: bool = True    # start the jaws SKIP_MARGIN short of the first contact
 
+    @classmethod
+    def of(cls, engine: str = "pybullet", **overrides) -> "Protocol":
+        """The protocol of ``engine`` with its own time step and solver iterations, the
+        other constants shared, then ``overrides``."""
+        own = ENGINE_DEFAULTS.get(engine)
+        if own is None:
+            raise ValueError(f"unknown physics engine '{engine}'")
+        return replace(cls(), engine=engine, **{**own, **overrides})
+
     def steps(self, seconds: float) -> int:
         return max(1, int(round(seconds / self.time_step)))
 
     def finer(self, factor: int) -> "Protocol":
         """The same protocol with a time step ``factor`` times smaller."""
         return replace(self, time_step=self.time_step / factor)
+
+
+#: Each engine's time step (s) and solver iterations, from its fidelity study
+#: (docs/physics.md: "Time step and iterations" for Bullet, "MuJoCo" for MuJoCo).
+ENGINE_DEFAULTS = {"pybullet": {"time_step": 1.0 / 480.0, "solver_iterations": 50},
+                   "mujoco": {"time_step": 0.002, "solver_iterations": 50}}
+#: The simulators behind the seam (harness.physics.trial.make_runner); the first is the default.
+ENGINES = tuple(ENGINE_DEFAULTS)

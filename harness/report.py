@@ -301,6 +301,13 @@ def display_table(s: pd.DataFrame) -> pd.DataFrame:
     })
 
 
+def engine_of(data: dict) -> dict:
+    """The physics engine a run's trials were simulated in, and its version as the run
+    recorded it."""
+    name = (data["config"].get("physics") or {}).get("engine", "pybullet")
+    return {"name": name, "version": (data["environment"].get("packages") or {}).get(name)}
+
+
 def _latex(s: pd.DataFrame) -> str:
     """booktabs table; the best posterior success per scene in bold."""
     shown = display_table(s).drop(columns=["complete"])
@@ -334,7 +341,10 @@ def write_report(out_dir: Path, figures: bool = True) -> dict:
     for name, frame in (("summary", s), ("comparisons", comp), ("calibration", cal), ("reliability", bins),
                         ("failures", fails), ("reasons", verdicts)):
         write_atomic(out_dir / f"{name}.csv", lambda tmp, frame=frame: frame.to_csv(tmp, index=False))
-    md = ["# " + data["config"]["name"], "", display_table(s).to_markdown(index=False), ""]
+    engine = engine_of(data)
+    md = ["# " + data["config"]["name"], "",
+          f"Physics: {engine['name']} {engine['version'] or ''}".rstrip() + " (docs/physics.md).", "",
+          display_table(s).to_markdown(index=False), ""]
     if not comp.empty:
         shown = comp.copy()
         shown["difference [95% CI]"] = [f"{d:+.3f} [{lo:+.3f}, {hi:+.3f}]"
@@ -357,7 +367,7 @@ def write_report(out_dir: Path, figures: bool = True) -> dict:
     for table in ("trials", "plans"):
         write_atomic(out_dir / f"{table}.parquet", lambda tmp, table=table: data[table].to_parquet(tmp, index=False))
     runs = data["runs"]
-    manifest = {"config": data["config"], "config_hash": data["hash"], **data["environment"],
+    manifest = {"config": data["config"], "config_hash": data["hash"], "engine": engine, **data["environment"],
                 "started": runs.started.iloc[0], "ended": runs.ended.iloc[-1],
                 "invocations": [{"started": r.started, "ended": r.ended, "status": r.status,
                                  "git_commit": json.loads(r.environment).get("git_commit")}

@@ -123,20 +123,21 @@ _THREAD = threading.local()
 
 
 def _runner(protocol):
-    """This thread's pybullet client for ``protocol``, kept between batches (a connect
-    costs about 25 ms). One per thread, as a Dask worker may run tasks in several. Each
-    batch starts from a reset world, so its outcomes do not depend on what ran before
-    (tested)."""
-    from harness.physics.trial import MAX_BATCH, Runner
+    """This thread's runner for ``protocol`` (its engine), kept between batches (a
+    pybullet connect costs about 25 ms). One per thread, as a Dask worker may run tasks
+    in several. Each batch starts from a reset world (pybullet) or from a model of its
+    own per trial (MuJoCo), so its outcomes do not depend on what ran before (tested)."""
+    from harness.physics.engines import make_runner
+    from harness.physics.trial import MAX_BATCH
 
     runners = _THREAD.__dict__.setdefault("runners", {})
     if protocol not in runners:
-        runners[protocol] = Runner(protocol, batch_size=MAX_BATCH)
+        runners[protocol] = make_runner(protocol, batch_size=MAX_BATCH)
     return runners[protocol]
 
 
 def run_batch(config: ExperimentConfig, batch: Batch) -> list[dict]:
-    """The trials of one batch in one freshly reset pybullet world; rows for the ledger."""
+    """The trials of one batch in the config's engine; rows for the ledger."""
     from harness.physics.simulate import make_trials
 
     trials = make_trials(settings_of(config, batch.scene_path), np.asarray(batch.grasp), batch.polygons,

@@ -17,7 +17,7 @@ from harness.physics.bodies import (convex_pieces, create_body, field_polygon, p
                                     prism_mass_properties)
 from harness.physics.simulate import make_trials, truth_polygon
 from harness.settings import resolve
-from harness.physics.trial import Runner
+from harness.physics.engines import make_runner
 from harness.scene import load_scene
 from harness.seeding import stream
 
@@ -135,7 +135,7 @@ def test_an_empty_sample_gives_an_empty_polygon_and_the_outcome_empty_shape():
     empty = field_polygon(np.full((scene.grid.size, scene.grid.size), 0.01), scene.grid)
     assert empty.is_empty
     trial = make_trials(resolve(scene), [[-0.045, 0], [0.045, 0]], [empty], np.zeros((1, 2, 2)))
-    assert Runner().run(trial)[0].outcome == "empty_shape"
+    assert make_runner().run(trial)[0].outcome == "empty_shape"
 
 
 def test_the_body_rests_on_the_table_at_its_true_height(client):
@@ -190,7 +190,7 @@ def test_cutting_a_convex_shape_into_pieces_changes_nothing_physical(monkeypatch
                 c = np.array([d, 0.0])
                 trials.append(Trial(bar, tuple(c - 0.045 * u), tuple(c + 0.045 * u), tuple(u), 0.03, 800.0, 0.5,
                                     gripper))
-    with Runner() as runner:
+    with make_runner() as runner:
         whole = [r.outcome for r in runner.run(trials)]
 
     def quarters(polygon):
@@ -199,7 +199,7 @@ def test_cutting_a_convex_shape_into_pieces_changes_nothing_physical(monkeypatch
                 for a, b in zip(xs[:-1], xs[1:])]
 
     monkeypatch.setattr(bodies, "convex_pieces", quarters)
-    with Runner() as runner:
+    with make_runner() as runner:
         cut = [r.outcome for r in runner.run(trials)]
     agreement = np.mean([a == b for a, b in zip(whole, cut)])
     assert agreement >= 0.93, (whole, cut)
@@ -271,7 +271,7 @@ def test_the_jaws_pass_through_the_foot_and_grip_the_prism():
     trial = Trial(u_shape, (0.0, 0.015), (0.085, 0.015), (1.0, 0.0), 0.03, 400.0, 0.5, gripper)
     widths, outcomes = [], []
     for foot in (False, True):
-        with Runner(Protocol(table_hull=foot)) as runner:
+        with make_runner(Protocol(table_hull=foot)) as runner:
             result = runner.run([trial])[0]
         widths.append(result.grip_width)
         outcomes.append(result.outcome)

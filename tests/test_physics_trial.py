@@ -12,7 +12,8 @@ import pytest
 
 from harness.canonical import canonical
 from harness.physics.simulate import make_trials, truth_polygon
-from harness.physics.trial import Runner, Trial, approach_blocked, free_travel
+from harness.physics.engines import make_runner
+from harness.physics.trial import Trial, approach_blocked, free_travel
 from harness.protocol import Protocol
 from harness.scene import load_scene
 from harness.settings import resolve
@@ -57,7 +58,7 @@ def test_the_calibration_grasps_on_the_rectangle():
     good = _rectangle_trial((-0.045, 0.0), (0.045, 0.0), scene)
     miss = _rectangle_trial((-0.045, 0.03), (0.045, 0.03), scene)
     inside = _rectangle_trial((-0.02, 0.0), (0.045, 0.0), scene)
-    with Runner() as runner:
+    with make_runner() as runner:
         results = runner.run([good] * 6 + [miss, inside])
     assert [r.outcome for r in results[:6]] == ["success"] * 6  # >= 98 % of 6 is all of them
     assert results[6].outcome == "no_contact"
@@ -70,7 +71,7 @@ def test_the_calibration_grasps_on_the_rectangle():
 
 def test_a_blown_up_simulation_is_recorded_as_unstable():
     trial = _rectangle_trial((-0.045, 0.0), (0.045, 0.0))
-    with Runner(Protocol(max_speed=-1.0)) as runner:  # any motion counts as runaway
+    with make_runner(Protocol(max_speed=-1.0)) as runner:  # any motion counts as runaway
         assert runner.run([trial])[0].outcome == "unstable"
 
 
@@ -81,7 +82,7 @@ def _pushed_distance(cone_friction: bool, angle: float, seconds: float = 0.25) -
     protocol = Protocol(cone_friction=cone_friction)
     mass, mu = 0.1, protocol.table_friction
     push = 1.3 * mu * mass * 9.81 * np.array([math.cos(angle), math.sin(angle), 0.0])
-    with Runner(protocol) as runner:
+    with make_runner(protocol) as runner:
         runner._reset_world()
         c = runner.client
         shape = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=[0.03, 0.03, 0.01], physicsClientId=c)
@@ -116,7 +117,7 @@ def test_the_same_seed_gives_the_same_trials_and_outcomes():
     def run_once():
         inputs = pipeline.posterior_inputs(pipeline.open_cell(scene, resolve(scene), 3, 0, 5), 5)
         trials = make_trials(resolve(scene), grasp, inputs.polygons, inputs.approach)
-        with Runner(batch_size=3) as runner:  # two batches: a world reset in between
+        with make_runner(batch_size=3) as runner:  # two batches: a world reset in between
             return trials, [repr(r.as_dict()) for r in runner.run(trials)]
 
     (trials_a, results_a), (trials_b, results_b) = run_once(), run_once()
@@ -131,9 +132,9 @@ def test_a_batch_does_not_depend_on_what_its_runner_ran_before():
     scene = load_scene("rectangle")
     batch = [_rectangle_trial((-0.045, y), (0.045, y), scene) for y in (0.0, 0.01)]
     before = [_rectangle_trial((x, -0.02), (0.04, 0.02), scene) for x in (-0.045, -0.04)]
-    with Runner() as fresh:
+    with make_runner() as fresh:
         alone = [repr(r.as_dict()) for r in fresh.run(batch)]
-    with Runner() as used:
+    with make_runner() as used:
         used.run(before)
         after = [repr(r.as_dict()) for r in used.run(batch)]
     assert after == alone
@@ -143,7 +144,7 @@ def test_a_batch_does_not_depend_on_what_its_runner_ran_before():
 def test_the_precomputed_base_motion_matches_the_protocols_closed_forms(factor):
     """The lift follows the minimum-jerk profile to the full height; the shake runs one
     circle of the amplitude under the sin^2 envelope, with the turn in phase with it."""
-    from harness.physics.trial import _motion
+    from harness.physics.trial import motion as _motion
 
     p = Protocol().finer(factor)
     m = _motion(p)
@@ -168,7 +169,7 @@ def test_the_contact_manifold_shortcut_of_the_lost_check_changes_no_result(monke
     candidates as drawn, on the true shapes and posterior samples of every library
     scene, held and slipped trials among them) every result is the same bit for bit as with
     the query at every check, while the query runs far less often."""
-    from harness.physics import trial as trial_module
+    from harness.physics import bullet as trial_module
     from harness.bench.physics_study import library_trials
 
     trials = library_trials(grasps_per_scene=2, ranked=False).trials
@@ -180,12 +181,12 @@ def test_the_contact_manifold_shortcut_of_the_lost_check_changes_no_result(monke
         return original(*args, **kwargs)
 
     monkeypatch.setattr(trial_module.pb, "getClosestPoints", counted)
-    with Runner() as runner:
+    with make_runner() as runner:
         shortcut = runner.run(trials)
     with_shortcut = len(queries)
     monkeypatch.setattr(trial_module, "NEAR_SLACK", 1.0)  # no manifold point can prove a jaw near
     queries.clear()
-    with Runner() as runner:
+    with make_runner() as runner:
         queried = runner.run(trials)
     assert [repr(r.as_dict()) for r in shortcut] == [repr(r.as_dict()) for r in queried]
     outcomes = {r.outcome for r in shortcut}

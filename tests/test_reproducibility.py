@@ -21,7 +21,7 @@ from harness.canonical import GRID
 from harness.geometry import inside_region, largest_region
 from harness.physics.bodies import simplified_outline
 from harness.physics.simulate import make_trials
-from harness.physics.trial import Runner
+from harness.physics.engines import make_runner
 from harness.report import load
 from harness.scene import load_scene
 from harness.seeding import stream
@@ -42,7 +42,7 @@ def marker():
     regions = [largest_region(inside_region(f, scene.grid)) for f in belief.sample(8, stream(0, "test-repro")).values]
     settings, approach = resolve(scene), stream(0, "test-repro-approach").standard_normal((8, 2, 2))
     trials = make_trials(settings, GRASP, [simplified_outline(r, scene.grid.cell) for r in regions], approach)
-    return scene, regions, settings, approach, trials, Runner().run(trials)
+    return scene, regions, settings, approach, trials, make_runner().run(trials)
 
 
 def _changed(rows, reference) -> int:
@@ -61,20 +61,20 @@ def test_a_plan_moved_by_1e_11_m_gives_the_same_trials(marker):
     assert np.all(np.abs(np.abs(offset) - 0.5) > 0.01)  # no coordinate next to a half-way point
     assert {r.outcome for r in rows} == {"success"}      # every trial simulated to the end
     moved = GRASP + 1e-11 * np.array([[1.0, -1.0], [-1.0, 1.0]])
-    again = Runner().run(make_trials(settings, moved, [t.polygon for t in trials], approach))
+    again = make_runner().run(make_trials(settings, moved, [t.polygon for t in trials], approach))
     assert _changed(again, rows) == 0
     # Not rounded, the same change reaches Bullet and changes (nearly) every row.
     raw = [replace(t, g1=(t.g1[0] + 1e-11, t.g1[1] - 1e-11), g2=(t.g2[0] - 1e-11, t.g2[1] + 1e-11)) for t in trials]
-    assert _changed(Runner().run(raw), rows) >= 6
+    assert _changed(make_runner().run(raw), rows) >= 6
 
 
 def test_outlines_moved_by_1e_12_m_give_the_same_trials(marker):
     scene, regions, settings, approach, trials, rows = marker
     outlines = [simplified_outline(_moved(r, 1e-12), scene.grid.cell) for r in regions]
     assert all(a.equals_exact(t.polygon, 0.0) for a, t in zip(outlines, trials, strict=True))
-    assert _changed(Runner().run(make_trials(settings, GRASP, outlines, approach)), rows) == 0
+    assert _changed(make_runner().run(make_trials(settings, GRASP, outlines, approach)), rows) == 0
     raw = [replace(t, polygon=_moved(t.polygon, 1e-12)) for t in trials]
-    assert _changed(Runner().run(raw), rows) >= 6
+    assert _changed(make_runner().run(raw), rows) >= 6
 
 
 def _provenance_hint(rerun: dict) -> str:

@@ -6,6 +6,7 @@ import math
 import multiprocessing
 import resource
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -396,8 +397,11 @@ PHYSICS_GRASPS_PER_SCENE = 12
 
 
 def physics(grasps_per_scene: int = PHYSICS_GRASPS_PER_SCENE, seed: int = 0) -> dict:
-    """Trials per second of the batched runner and of a naive one (a new world per trial,
-    no early stop) on the same trials, and the outcome agreement with a 4x finer step."""
+    """Trials per second of Bullet's batched runner and of a naive one (a new world per
+    trial, no early stop) on the same trials, and the outcome agreement with a 4x finer
+    step; the same for MuJoCo on the same trials in the same run (its trials per second
+    over Bullet's batched runner, its agreement with its own 4x finer step and with
+    Bullet, trial by trial)."""
     from harness.physics.simulate import outcome_counts
     from harness.bench.physics_study import agreement, confusion, library_trials, run_batched, run_naive
     from harness.protocol import Protocol
@@ -407,7 +411,18 @@ def physics(grasps_per_scene: int = PHYSICS_GRASPS_PER_SCENE, seed: int = 0) -> 
     batched = run_batched(trials, protocol)
     naive = run_naive(trials, protocol)
     fine = run_batched(trials, protocol.finer(4))
+    mj = Protocol.of("mujoco")
+    mujoco, mujoco_fine = run_batched(trials, mj), run_batched(trials, mj.finer(4))
     return {
+        "mujoco": {"time_step": mj.time_step, "solver_iterations": mj.solver_iterations,
+                   "trials_per_s": mujoco.rate, "over_pybullet": mujoco.rate / batched.rate,
+                   "fine_step_agreement": agreement(mujoco.results, mujoco_fine.results),
+                   "fine_step_disagreements": confusion(mujoco.results, mujoco_fine.results),
+                   "agreement_with_pybullet": agreement(mujoco.results, batched.results),
+                   "against_pybullet": confusion(batched.results, mujoco.results),
+                   "outcomes": outcome_counts(mujoco.results),
+                   "outcomes_fine_step": outcome_counts(mujoco_fine.results),
+                   "seconds": {"batched": mujoco.seconds, "fine_step": mujoco_fine.seconds}},
         "trials": len(trials), "time_step": protocol.time_step, "solver_iterations": protocol.solver_iterations,
         "batched_trials_per_s": batched.rate, "naive_trials_per_s": naive.rate, "speedup": batched.rate / naive.rate,
         "fine_step_agreement": agreement(batched.results, fine.results),
@@ -421,18 +436,29 @@ def physics(grasps_per_scene: int = PHYSICS_GRASPS_PER_SCENE, seed: int = 0) -> 
 def lift(trials: int = 16, seed: int = 0) -> dict:
     """The lift model against the physics: the bar sweeps (where P_L and simulated success
     fall through 0.5) and the friction levers of Bullet's contact manifolds on the
-    library trial set (harness.bench.lift_study)."""
+    library trial set (harness.bench.lift_study); the bar sweeps again in MuJoCo."""
     from harness.bench.lift_study import manifold_levers, validate
 
-    return {**validate(trials=trials, seed=seed), "manifold_levers": manifold_levers(seed=seed)}
+    return {**validate(trials=trials, seed=seed), "manifold_levers": manifold_levers(seed=seed),
+            "mujoco": validate(trials=trials, seed=seed, engine="mujoco")}
 
 
 def run(which: str = "all", exact_max_mb: float = 2500.0, sizes=None, seeds: int | None = None, scenes=None,
-        candidates: int | None = None, first_seed: int = 0, shared_draws=(), prior_draws=()) -> dict:
+        candidates: int | None = None, first_seed: int = 0, shared_draws=(), prior_draws=(),
+        out: str = "results/engines", workers: int | None = None) -> dict:
     """Run the named benchmark(s); returns a JSON-ready dict. ``seeds``, ``scenes``,
     ``candidates``, ``first_seed``, ``shared_draws`` and ``prior_draws`` set the bandit
-    study (``bandit``, and inside ``planning``; see :func:`bandit`)."""
+    study (``bandit``, and inside ``planning``; see :func:`bandit`); ``out`` and
+    ``workers`` the engines study (``engines``, not part of ``all``: it runs make eval's
+    experiment twice)."""
     results = {}
+    if which == "engines":
+        import sys
+
+        from harness.bench import engines_study
+
+        return engines_study.run(out=Path(out), workers=workers,
+                                 log=lambda line: print(line, file=sys.stderr, flush=True))
     if which in ("sampling", "all"):
         results["sampling"] = sampling(tuple(sizes or SAMPLING_SIZES), exact_max_mb)
     if which in ("planning", "all"):
@@ -462,6 +488,10 @@ def format_results(results: dict) -> str:
         kind = ("sampling" if "active_set_effect" in results else "quality" if "heavy_scenes" in results
                 else "planning")
         results = {kind: results}
+    if "cell_rms" in results:
+        from harness.bench.engines_study import format_lines
+
+        return "\n".join(format_lines(results))
     lines = []
     for name, res in results.items():
         if name == "lift":
@@ -476,6 +506,14 @@ def format_results(results: dict) -> str:
             lines.append(f"agreement with a 4x finer step: {res['fine_step_agreement']:.3f}; "
                          f"differences: {res['fine_step_disagreements'] or 'none'}")
             lines.append("outcomes: " + ", ".join(f"{k} {v}" for k, v in res["outcomes"].items() if v))
+            mj = res["mujoco"]
+            lines.append(f"MuJoCo, the same trials: step {mj['time_step']:.6g} s, {mj['solver_iterations']} "
+                         f"iterations, {mj['trials_per_s']:.2f} trials/s, {mj['over_pybullet']:.2f}x Bullet's batched "
+                         f"runner; agreement with a 4x finer step {mj['fine_step_agreement']:.3f}, with Bullet "
+                         f"{mj['agreement_with_pybullet']:.3f}")
+            lines.append("MuJoCo outcomes: " + ", ".join(f"{k} {v}" for k, v in mj["outcomes"].items() if v)
+                         + "; Bullet -> MuJoCo: " + (", ".join(f"{k} {v}" for k, v in mj["against_pybullet"].items())
+                                                      or "no difference"))
         if name == "quality":
             lines.append(f"quality: mean analytic P_F over {res['seeds']} seeds (scene sigma_g and friction)")
             lines.append(f"{'scene':<15}" + "".join(f"{p:>13}" for p in QUALITY_PLANNERS) + "  heavy")
@@ -630,6 +668,18 @@ def _bandit_lines(res: dict) -> list[str]:
 
 
 def _lift_lines(res: dict) -> list[str]:
+    lines = _bar_lines(res)
+    m = res["manifold_levers"]
+    q = m["quartiles"]
+    lines.append(f"Bullet's manifold levers on {m['plates']} plates of the library trial set, as fractions of the "
+                 f"largest admissible lever: quartiles {q[0]:.2f} / {q[1]:.2f} / {q[2]:.2f} (uniform: 0.25 / 0.50 / "
+                 f"0.75), {m['single_point']:.0%} held by one point, {m['beyond_largest']:.1%} beyond the largest")
+    if "mujoco" in res:
+        lines += ["", "the same bars in MuJoCo:", *_bar_lines(res["mujoco"])]
+    return lines
+
+
+def _bar_lines(res: dict) -> list[str]:
     def at(v):
         return "never" if v is None else f"{v * 1e3:.1f}"
 
@@ -653,9 +703,4 @@ def _lift_lines(res: dict) -> list[str]:
     lines.append(f"largest relative error: P_L vs success {err(largest)}, the model's turning vs the "
                  f"simulation's {err(res['largest_turning_error'])}"
                  + (f"; {res['missing']} rows without a crossing on one side" if res["missing"] else ""))
-    m = res["manifold_levers"]
-    q = m["quartiles"]
-    lines.append(f"Bullet's manifold levers on {m['plates']} plates of the library trial set, as fractions of the "
-                 f"largest admissible lever: quartiles {q[0]:.2f} / {q[1]:.2f} / {q[2]:.2f} (uniform: 0.25 / 0.50 / "
-                 f"0.75), {m['single_point']:.0%} held by one point, {m['beyond_largest']:.1%} beyond the largest")
     return lines

@@ -21,7 +21,8 @@ import numpy as np
 
 from harness.grasp import SDFBatch
 from harness.physics.simulate import make_trials, truth_polygon
-from harness.physics.trial import Runner
+from harness.physics.engines import make_runner
+from harness.protocol import Protocol
 from harness.quality import EvaluationDraws, evaluate_draws
 from harness.scene import Scene, parse_scene
 from harness.seeding import stream
@@ -92,7 +93,7 @@ BARS = (
 )
 
 
-def sweep(bar: Bar, trials: int = 12, seed: int = 0, runner: Runner | None = None) -> list[dict]:
+def sweep(bar: Bar, trials: int = 12, seed: int = 0, runner=None) -> list[dict]:
     """Per offset: simulated success, the fraction of trials that turned (pivot above
     TURNED), the outcomes and the angles of the turned trials that ended held; the
     analytic P_L and the analytic fraction of draws that turn."""
@@ -108,7 +109,7 @@ def sweep(bar: Bar, trials: int = 12, seed: int = 0, runner: Runner | None = Non
     polygon = truth_polygon(scene)
     batch = [t for d in offsets for t in make_trials(settings, bar.grasp(d), [polygon], approach[:trials])]
     own = runner is None
-    runner = runner or Runner()
+    runner = runner or make_runner()
     try:
         results = runner.run(batch)
     finally:
@@ -140,13 +141,14 @@ def _relative(model: float | None, sim: float | None) -> float | None:
     return None if model is None or sim is None else (model - sim) / sim
 
 
-def validate(bars=BARS, trials: int = 12, seed: int = 0) -> dict:
+def validate(bars=BARS, trials: int = 12, seed: int = 0, engine: str = "pybullet") -> dict:
     """Every bar's sweep and its crossings: where P_L and simulated success fall through
     0.5, and where the analytic and the simulated share of draws that did not turn do;
     the relative errors and the largest of them; per bar, the median angle at which the
-    turned trials that ended held had stopped, and the simulated failures by outcome."""
+    turned trials that ended held had stopped, and the simulated failures by outcome.
+    ``engine``: the simulator of the trials (the analytic side does not depend on it)."""
     rows = []
-    with Runner() as runner:
+    with make_runner(Protocol.of(engine)) as runner:
         for bar in bars:
             points = sweep(bar, trials, seed, runner)
             x = [p["offset"] for p in points]
@@ -168,7 +170,8 @@ def validate(bars=BARS, trials: int = 12, seed: int = 0) -> dict:
         values = [abs(r[key]) for r in rows if r[key] is not None]
         return max(values) if values else None
 
-    return {"trials_per_offset": trials, "analytic_draws": max(trials, ANALYTIC_DRAWS), "sigma_g": SIGMA_G,
+    return {"engine": engine, "trials_per_offset": trials, "analytic_draws": max(trials, ANALYTIC_DRAWS),
+            "sigma_g": SIGMA_G,
             "rows": rows, "largest_error": largest("error"), "largest_turning_error": largest("turning_error"),
             "missing": sum(r["error"] is None for r in rows)}
 
@@ -184,11 +187,12 @@ def manifold_levers(grasps_per_scene: int = 6, seed: int = 0) -> dict:
 
     from harness.lift import PLATE_CLEARANCE
     from harness.bench.physics_study import library_trials
-    from harness.physics.trial import _Slot, approach_blocked
+    from harness.physics.bullet import _Slot
+    from harness.physics.trial import approach_blocked
 
     trial_set = library_trials(grasps_per_scene, seed)
     fractions, single = [], 0
-    with Runner() as runner:
+    with make_runner() as runner:
         for trial in trial_set.trials:
             if trial.polygon.is_empty or approach_blocked(trial):
                 continue

@@ -17,7 +17,8 @@ import numpy as np
 
 from harness.belief import build_belief
 from harness.physics.simulate import make_trials, truth_polygon
-from harness.physics.trial import Runner, Trial, TrialResult
+from harness.physics.engines import make_runner
+from harness.physics.trial import Trial, TrialResult
 from harness.protocol import Protocol
 from harness.scene import library_names, load_scene
 from harness.settings import resolve
@@ -106,7 +107,7 @@ class Timed:
 
 def run_batched(trials: list[Trial], protocol: Protocol, batch_size: int = 16) -> Timed:
     start = time.perf_counter()
-    with Runner(protocol, batch_size=batch_size) as runner:
+    with make_runner(protocol, batch_size=batch_size) as runner:
         results = runner.run(trials)
     return Timed(results, time.perf_counter() - start)
 
@@ -117,7 +118,7 @@ def run_naive(trials: list[Trial], protocol: Protocol) -> Timed:
     start = time.perf_counter()
     results = []
     for trial in trials:
-        with Runner(protocol, batch_size=1, early_stop=False) as runner:
+        with make_runner(protocol, batch_size=1, early_stop=False) as runner:
             results += runner.run([trial])
     return Timed(results, time.perf_counter() - start)
 

@@ -1,0 +1,404 @@
+"""The MuJoCo engine: the same trial as :mod:`harness.physics.bullet`, in MuJoCo.
+
+Each trial is one MuJoCo model, compiled from MJCF text written here: the table (a
+plane), the object (a free body whose collision geoms are the same convex pieces as in
+Bullet, extruded, with the exact mass, centre of mass and principal inertia of the whole
+prism, and the foot when the protocol has one), and the parallel jaw (a palm welded to a
+mocap body that the protocol drives, two plates on prismatic joints, each closed by a
+force-limited velocity servo). The state machine and every outcome's rule are the
+engine-neutral ones of :class:`harness.physics.trial.TrialMachine`.
+
+The contact parameters are chosen from MuJoCo's documentation and from the physics of a
+rubber-padded plate on a rigid wall, never by agreement with Bullet or with P_L; each
+constant below says why, and docs/physics.md ("MuJoCo") has the fidelity study of the
+time step and the solver's iterations.
+
+A trial's model depends on nothing but the trial and the protocol, and MuJoCo is
+deterministic on one machine, so a trial's result does not depend on the trials beside
+it, on the batch size or on the number of workers.
+"""
+
+from __future__ import annotations
+
+import math
+from functools import lru_cache
+from pathlib import Path
+from typing import Callable, Sequence
+
+import mujoco
+import numpy as np
+import shapely
+from shapely.geometry import Polygon
+
+from harness.physics.bodies import convex_pieces, principal_frame, prism_mass_properties
+from harness.physics.gripper import PALM_MASS, PALM_THICKNESS, PLATE_MASS
+from harness.physics.trial import (MAX_BATCH, TABLE_GAP, Trial, TrialMachine, TrialResult, prechecked,
+                                   skipped_travel, yaw)
+from harness.protocol import Protocol
+
+#: A jaw's contacts with the object have four dimensions: the normal, two sliding
+#: directions and torsion about the normal (condim 4). Rolling friction (condim 6) is
+#: left out: a flat plate on a flat wall resists tipping through the spread of its
+#: contact points (multiccd below), not through a rolling torque at each point.
+JAW_CONDIM = 4
+#: The object's contacts with the table: normal and sliding (condim 3); its resting
+#: patch resists turning through the spread of the foot's contact points.
+TABLE_CONDIM = 3
+#: Radius (m) of the patch of rubber pad that carries one contact point's load. A pad
+#: pressed on a wall conforms over a patch about as wide as the pad is thick (a pad of
+#: 2 mm); under uniform pressure a disc of radius a resists a turn about its normal with
+#: at most (2/3) mu a N (integrate mu N / (pi a^2) * r over the disc), so the torsional
+#: coefficient is (2/3) mu PAD_RADIUS, a length, for each point.
+PAD_RADIUS = 0.002
+#: Ratio of the frictional to the normal constraints' impedance (elliptic cones). MuJoCo's
+#: contacts are soft: at the default 1 a static friction force is held with a creep
+#: velocity proportional to it, so a grasped object slides slowly out of any grip. Coulomb
+#: static friction does not creep; MuJoCo's documentation recommends raising impratio to
+#: make friction harder without changing the coefficient. 10 removes creep on the
+#: held-bar checks (tests) while leaving the solver's convergence unchanged.
+IMPRATIO = 10.0
+#: Contact softness: solref's time constant (s) and damping ratio. A rubber pad of a
+#: square centimetre, 2 mm thick, with Young's modulus about 2 MPa is a spring of about
+#: 1e5 N/m: on a 0.1 kg object its period is near 6 ms, too fast for a 2 ms step. So the
+#: contacts are as stiff as the step resolves: MuJoCo's documentation asks for a time
+#: constant of at least two steps; 5 ms (2.5 steps), critically damped. Fixed in
+#: seconds, so that a finer step (the fidelity study) does not change the physics.
+CONTACT_TIMECONST = 0.004
+CONTACT_DAMPRATIO = 1.0
+#: The weld that carries the palm along the protocol's path: as stiff as the contacts.
+WELD_TIMECONST = 0.004
+#: How each jaw closes: a constant force, the gripper's force limit, against a viscous
+#: damper of force / closing speed (N s/m) in its joint. Free, the jaw closes at the
+#: closing speed (reached in a tenth of a millisecond); held by the object, it pushes
+#: with exactly the force limit, as Bullet's finger motor does once it stalls. The damper
+#: is integrated implicitly (implicitfast). A soft mechanism in its place (a carriage
+#: driving the plate through a slide joint's dry friction, a constraint as soft as the
+#: contacts) squeezed with less than the limit while the plates were still and let a
+#: third of the library's held objects slip (docs/physics.md, "MuJoCo").
+#: The table's size (m): a plane; only its visual extent depends on it.
+TABLE_HALF = 1.0
+
+
+def contact_timeconst(protocol: Protocol) -> float:
+    """The contact time constant: CONTACT_TIMECONST, or two steps if the step is coarser."""
+    return max(CONTACT_TIMECONST, 2.0 * protocol.time_step)
+
+
+class MujocoRunner:
+    """Runs trials in MuJoCo, one model per trial. ``batch_size`` only groups the
+    progress callbacks (the models are independent); ``early_stop`` as in Bullet."""
+
+    def __init__(self, protocol: Protocol | None = None, batch_size: int = 16, early_stop: bool = True):
+        if not 1 <= batch_size <= MAX_BATCH:
+            raise ValueError(f"batch_size must be 1 to {MAX_BATCH}")
+        self.protocol = protocol or Protocol.of("mujoco")
+        self.batch_size = batch_size
+        self.early_stop = early_stop
+
+    def __enter__(self) -> "MujocoRunner":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def close(self) -> None:
+        pass
+
+    def run(self, trials: Sequence[Trial], frames: Path | None = None,
+            progress: Callable[[int], None] | None = None) -> list[TrialResult]:
+        """Outcomes of the trials, in order. ``frames``: a folder for PNG snapshots of
+        each phase of the first trial. ``progress`` is called with each batch's size."""
+        results: list[TrialResult] = []
+        for start in range(0, len(trials), self.batch_size):
+            batch = trials[start:start + self.batch_size]
+            for k, trial in enumerate(batch):
+                camera = None
+                if frames is not None and start == 0 and k == 0:
+                    from harness.physics.frames import Frames
+
+                    camera = Frames(Path(frames))
+                results.append(self.run_one(trial, camera))
+            if progress:
+                progress(len(batch))
+        return results
+
+    def run_one(self, trial: Trial, camera=None) -> TrialResult:
+        early = prechecked(trial)
+        if early is not None:
+            if camera is not None and early.outcome == "approach_collision":
+                camera.footprint(trial)
+            return early
+        slot = _Slot(self, trial, camera)
+        m, d = slot.model, slot.data
+        while slot.result is None:
+            quiet = slot.undecided_steps()
+            if quiet:
+                slot.advance(quiet)
+            slot.before_step()
+            mujoco.mj_step(m, d)
+            slot.fresh = False
+            slot.after_step()
+        return slot.result
+
+
+class _Slot(TrialMachine):
+    """One trial's model, data and state machine."""
+
+    def __init__(self, runner: MujocoRunner, trial: Trial, camera=None):
+        super().__init__(0, trial, runner.protocol, runner.early_stop)
+        p, g, t = runner.protocol, trial.gripper, trial
+        check_gripper(g)
+        self.camera = camera
+        g1, g2 = np.asarray(t.g1), np.asarray(t.g2)
+        centre = 0.5 * (g1 + g2)
+        heading = math.atan2(t.axis[1], t.axis[0]) - math.atan2(g.closing_axis[1], g.closing_axis[0])
+        base_z = g.depth + TABLE_GAP
+        self.model = compiled(object_xml(t.polygon, t.thickness, t.density, p.table_hull),
+                              gripper_xml(g, t.friction), options_xml(p))
+        m = self.model
+        self.data = d = mujoco.MjData(m)
+        self.fresh = False
+        body = m.body
+        self.obj = body("object").id
+        self.palm = body("palm").id
+        jnt = m.joint
+        self.obj_qpos = m.jnt_qposadr[jnt("object").id]
+        self.obj_dof = m.jnt_dofadr[jnt("object").id]
+        self.palm_qpos = m.jnt_qposadr[jnt("palm").id]
+        self.finger_qpos = [m.jnt_qposadr[jnt(f"jaw_{k + 1}").id] for k in range(2)]
+        self.finger_dof = [m.jnt_dofadr[jnt(f"jaw_{k + 1}").id] for k in range(2)]
+        self.limits = tuple(float(m.jnt_range[jnt(f"jaw_{k + 1}").id][1]) for k in range(2))
+        self.jaw_geoms = [m.geom(f"plate_{k + 1}").id for k in range(2)]
+        self.pieces = [k for k in range(m.ngeom) if m.geom_bodyid[k] == self.obj and m.geom(k).name != "foot"]
+        self.touching = [k for k in range(m.ngeom) if m.geom_bodyid[k] == self.obj
+                         and (m.geom(k).name == "foot" or not p.table_hull)]
+        self.table = m.geom("table").id
+        width = math.dist(t.g1, t.g2) - 2 * skipped_travel(t, p)
+        position, turn = (float(centre[0]), float(centre[1]), base_z), _turn(heading)
+        d.qpos[self.palm_qpos:self.palm_qpos + 7] = (*position, *turn)
+        d.mocap_pos[0], d.mocap_quat[0] = position, turn
+        for jaw in range(2):
+            d.qpos[self.finger_qpos[jaw]] = g.joint_position(jaw, (-0.5 if jaw == 0 else 0.5) * width)
+        d.ctrl[:] = g.force
+        mujoco.mj_forward(m, d)
+        self.fresh = True
+        self.start(width, position[:2], heading, base_z)
+        self.paths = self._paths()
+
+    # -- the engine's queries -----------------------------------------------------------
+
+    def _kinematics(self) -> None:
+        """Positions of every body and geom for the current state (mj_step leaves them
+        as they were at the start of the step)."""
+        if not self.fresh:
+            mujoco.mj_kinematics(self.model, self.data)
+            self.fresh = True
+
+    def before_step(self) -> None:
+        """The gripper's target at this step of the lift or the shake, from the paths
+        computed once per trial (:meth:`_paths`)."""
+        path = self.paths.get(self.phase)
+        if path is not None:
+            self.data.mocap_pos[0] = path[0][self.tick]
+            self.data.mocap_quat[0] = path[1][self.tick]
+
+    def advance(self, steps: int) -> None:
+        """Run ``steps`` steps that decide nothing: along the path, or in one call to
+        MuJoCo while the gripper holds still."""
+        m, d = self.model, self.data
+        path = self.paths.get(self.phase)
+        if path is None:
+            mujoco.mj_step(m, d, steps)
+        else:
+            positions, turns = path
+            for k in range(self.tick, self.tick + steps):
+                d.mocap_pos[0] = positions[k]
+                d.mocap_quat[0] = turns[k]
+                mujoco.mj_step(m, d)
+        self.fresh = False
+        self.ticked(steps)
+
+    def _paths(self) -> dict:
+        """The gripper target's positions (n, 3) and turns (n, 4, quaternions) at each
+        step of the lift and of the shake: the protocol's motion (trial.motion) about
+        this trial's grasp centre and heading, as TrialMachine.before_step moves it."""
+        m, (cx, cy), h, z = self.motion, self.centre, self.heading, self.base_z
+        rise = np.asarray(m.rise)
+        lift = (np.column_stack([np.full_like(rise, cx), np.full_like(rise, cy), z + rise]),
+                np.tile(_turn(h), (len(rise), 1)))
+        a, b, turn = np.asarray(m.shake).T
+        ch, sh = self.heading_cos_sin
+        angle = 0.5 * (h + turn)
+        shake = (np.column_stack([cx + a * ch - b * sh, cy + a * sh + b * ch,
+                                  np.full_like(a, z + self.protocol.lift_height)]),
+                 np.column_stack([np.cos(angle), np.zeros_like(a), np.zeros_like(a), np.sin(angle)]))
+        return {"lift": lift, "shake": shake}
+
+    def jaw_states(self):
+        q, v = self.data.qpos.tolist(), self.data.qvel.tolist()
+        return tuple((q[a], v[u]) for a, u in zip(self.finger_qpos, self.finger_dof))
+
+    def jaws_shut(self, states) -> bool:
+        """A soft limit may be passed by a little: at or beyond it within 0.1 mm."""
+        return all(q > limit - 1e-4 for (q, _), limit in zip(states, self.limits))
+
+    def near_jaws(self, distance: float) -> int:
+        self._kinematics()
+        m, d = self.model, self.data
+        near = 0
+        for jaw in self.jaw_geoms:
+            near += any(mujoco.mj_geomDistance(m, d, piece, jaw, distance, None) < distance
+                        for piece in self.pieces)
+        return near
+
+    def on_table(self) -> bool:
+        """Touching the table: within the held distance of it, as a jaw counts as touching."""
+        self._kinematics()
+        m, d, limit = self.model, self.data, self.protocol.held_distance
+        return any(mujoco.mj_geomDistance(m, d, geom, self.table, limit, None) < limit for geom in self.touching)
+
+    def blew_up(self) -> bool:
+        """With MuJoCo's automatic reset off (options_xml), a diverged state stays NaN."""
+        p, d = self.protocol, self.data
+        vx, vy, vz, wx, wy, wz = d.qvel[self.obj_dof:self.obj_dof + 6].tolist()
+        x, y, z = d.qpos[self.obj_qpos:self.obj_qpos + 3].tolist()
+        if not all(map(math.isfinite, (x, y, z, vx, vy, vz, wx, wy, wz))):
+            return True
+        return math.hypot(vx, vy, vz) > p.max_speed or math.hypot(wx, wy, wz) > p.max_spin
+
+    def object_height_and_yaw(self) -> tuple[float, float]:
+        self._kinematics()
+        w, x, y, z = self.data.xquat[self.obj]
+        return float(self.data.xipos[self.obj][2]), yaw((x, y, z, w))
+
+    def relative_pose(self):
+        q = self.data.qpos
+        grip = q[self.palm_qpos + 3:self.palm_qpos + 7]
+        obj = q[self.obj_qpos + 3:self.obj_qpos + 7]
+        inverse, out = np.empty(4), np.empty(4)
+        mujoco.mju_negQuat(inverse, grip)
+        mujoco.mju_mulQuat(out, inverse, obj)
+        return tuple(float(v) for v in out)
+
+    def snapshot(self, name: str) -> None:
+        if self.camera is not None:
+            self._kinematics()
+            self.camera.snapshot(name, self)
+
+
+def check_gripper(g) -> None:
+    """MuJoCo builds the built-in parallel jaw from the adapter's numbers; a gripper
+    from another URDF cannot be translated."""
+    if not Path(g.urdf).name.startswith("gpis-harness-gripper-") or tuple(g.closing_axis) != (1.0, 0.0) \
+            or tuple(g.face_per_unit) != (1.0, -1.0):
+        raise ValueError("the MuJoCo engine runs the built-in parallel-jaw gripper only "
+                         f"(got {g.urdf}); use the pybullet engine for another URDF")
+
+
+def _floats(values) -> str:
+    return " ".join(f"{float(v):.12g}" for v in values)
+
+
+def _prism(piece: Polygon, z0: float, z1: float) -> list:
+    ring = np.asarray(shapely.geometry.polygon.orient(piece, 1.0).exterior.coords)[:-1]
+    return [*((x, y, z0) for x, y in ring), *((x, y, z1) for x, y in ring)]
+
+
+@lru_cache(maxsize=256)
+def object_xml(polygon: Polygon, thickness: float, density: float, foot: bool) -> tuple[str, str]:
+    """The object's mesh assets and its body (MJCF), in the polygon's frame: each convex
+    piece of :func:`~harness.physics.bodies.convex_pieces` extruded to the full
+    thickness (MuJoCo's convex geoms have no margin to shrink for), and with ``foot``
+    a slab over the convex hull at the bottom that alone meets the table (as in Bullet,
+    docs/physics.md "The foot"). The inertial is the exact prism's, in its principal frame."""
+    pieces = convex_pieces(polygon)
+    props = prism_mass_properties(polygon, thickness, density)
+    moments, (qx, qy, qz, qw) = principal_frame(props.inertia)
+    assets, geoms = [], []
+    for k, piece in enumerate(pieces):
+        assets.append(f'<mesh name="piece{k}" vertex="{_floats(np.ravel(_prism(piece, 0.0, thickness)))}"/>')
+        geoms.append(f'<geom name="piece{k}" type="mesh" mesh="piece{k}" contype="1" '
+                     f'conaffinity="{0 if foot else 2}" group="1"/>')
+    if foot:
+        from harness.physics.bodies import FOOT_HEIGHT
+
+        slab = _prism(polygon.convex_hull, 0.0, min(FOOT_HEIGHT, 0.5 * thickness))
+        assets.append(f'<mesh name="foot" vertex="{_floats(np.ravel(slab))}"/>')
+        geoms.append('<geom name="foot" type="mesh" mesh="foot" contype="0" conaffinity="2" group="3"/>')
+    body = (f'<body name="object"><freejoint name="object"/>'
+            f'<inertial pos="{_floats(props.com)}" quat="{_floats((qw, qx, qy, qz))}" mass="{props.mass:.12g}" '
+            f'diaginertia="{_floats(moments)}"/>{"".join(geoms)}</body>')
+    return "".join(assets), body
+
+
+def _turn(heading: float) -> tuple[float, float, float, float]:
+    """The quaternion (w, x, y, z) of a turn by ``heading`` about the vertical."""
+    return (math.cos(0.5 * heading), 0.0, 0.0, math.sin(0.5 * heading))
+
+
+def gripper_xml(g, friction: float) -> str:
+    """The palm (welded to the mocap body ``target``), the two plates on prismatic
+    joints and their servos, from the built-in gripper's adapter (harness.physics.gripper),
+    at the origin (each trial places it through the state: one model serves every trial
+    of a shape)."""
+    half, t, w, length = g.face_at_zero[1], g.pad_thickness, g.pad_width, g.depth
+    torsion = 2.0 / 3.0 * friction * PAD_RADIUS
+    palm = (half + t, max(w, 0.02) / 2, PALM_THICKNESS / 2)
+    plate = (t / 2, w / 2, length / 2)
+    damping = g.force / g.closing_speed
+    jaws = []
+    for k, sign in ((1, -1), (2, 1)):
+        jaws.append(
+            f'<body name="jaw_{k}" gravcomp="1"><joint name="jaw_{k}" type="slide" axis="{-sign} 0 0" '
+            f'range="0 {half:.12g}" limited="true" damping="{damping:.12g}"/>'
+            f'<inertial pos="{sign * (half + t / 2):.12g} 0 {-length / 2:.12g}" mass="{PLATE_MASS}" '
+            f'diaginertia="{_floats(_box_inertia(PLATE_MASS, plate))}"/>'
+            f'<geom name="plate_{k}" type="box" size="{_floats(plate)}" '
+            f'pos="{sign * (half + t / 2):.12g} 0 {-length / 2:.12g}" contype="0" conaffinity="1" '
+            f'condim="{JAW_CONDIM}" priority="1" friction="{friction:.12g} {torsion:.12g} 0" '
+            f'rgba="0.55 0.57 0.6 1"/></body>')
+    actuators = "".join(f'<motor joint="jaw_{k}" gear="1"/>' for k in (1, 2))
+    return (f'<body name="target" mocap="true"/>'
+            f'<body name="palm" gravcomp="1"><freejoint name="palm"/>'
+            f'<inertial pos="0 0 0" mass="{PALM_MASS}" diaginertia="{_floats(_box_inertia(PALM_MASS, palm))}"/>'
+            f'<geom name="palm" type="box" size="{_floats(palm)}" pos="0 0 {PALM_THICKNESS / 2:.12g}" '
+            f'contype="0" conaffinity="1" priority="1" condim="{JAW_CONDIM}" '
+            f'friction="{friction:.12g} {torsion:.12g} 0" rgba="0.25 0.25 0.28 1"/>'
+            f'{"".join(jaws)}</body>'
+            f'</worldbody><actuator>{actuators}</actuator>'
+            f'<equality><weld body1="palm" body2="target" relpose="0 0 0 1 0 0 0" '
+            f'solref="{WELD_TIMECONST} 1"/></equality>')
+
+
+def options_xml(p: Protocol) -> str:
+    """The simulation options: the protocol's step and iterations; Newton's solver;
+    the elliptic cone (pyramidal without ``cone_friction``); implicit integration of the
+    servos' damping; several contacts between convex geoms (multiccd), so that a plate
+    flat on a wall is held over a patch, not at one point."""
+    cone = "elliptic" if p.cone_friction else "pyramidal"
+    tc = contact_timeconst(p)
+    return (f'<option timestep="{p.time_step:.12g}" iterations="{p.solver_iterations}" solver="Newton" '
+            f'cone="{cone}" impratio="{IMPRATIO:.12g}" integrator="implicitfast" gravity="0 0 -9.81">'
+            f'<flag multiccd="enable" autoreset="disable"/></option>'
+            f'<default><geom solref="{tc:.12g} {CONTACT_DAMPRATIO:.12g}"/></default>'), p.table_friction
+
+
+@lru_cache(maxsize=128)
+def compiled(obj: tuple[str, str], gripper: str, options: tuple[str, float]) -> mujoco.MjModel:
+    """The trial's model from its parts' MJCF, compiled once per process for each shape,
+    gripper and protocol (a compile takes 4-10 ms; an experiment executes each posterior
+    sample once per planner and the true shape in every truth trial). Never changed
+    after compiling: every trial gets fresh data (MjData) of its own."""
+    assets, body = obj
+    option_text, table_friction = options
+    xml = (f'<mujoco model="gpis-harness trial"><compiler angle="radian" inertiafromgeom="false"/>'
+           f'{option_text}<asset>{assets}</asset><worldbody>'
+           f'<geom name="table" type="plane" size="{TABLE_HALF} {TABLE_HALF} 0.1" contype="2" conaffinity="0" '
+           f'condim="{TABLE_CONDIM}" priority="1" friction="{table_friction:.12g} 0 0" rgba="0.8 0.82 0.78 1"/>'
+           f'{body}{gripper}</mujoco>')
+    return mujoco.MjModel.from_xml_string(xml)
+
+
+def _box_inertia(mass: float, half_size) -> tuple[float, float, float]:
+    a, b, c = (2 * s for s in half_size)
+    return mass * (b * b + c * c) / 12, mass * (a * a + c * c) / 12, mass * (a * a + b * b) / 12

@@ -1,0 +1,245 @@
+"""The second engine: MuJoCo's trial against closed forms (the jaws' squeeze, the pad's
+stiffness and torsion, the prism's mass), the calibration grasps on the rectangle,
+determinism with any number of workers, the engine in configs, manifests and
+cross-engine comparisons. The fidelity and agreement figures live in
+``gpis-harness bench physics`` and ``bench engines`` (docs/physics.md, "MuJoCo")."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pandas as pd
+import pytest
+
+from harness.cli import main
+from harness.physics import mujoco_engine as me
+from harness.physics.bodies import principal_frame, prism_mass_properties
+from harness.physics.simulate import make_trials, truth_polygon
+from harness.physics.engines import make_runner
+from harness.protocol import ENGINE_DEFAULTS, Protocol
+from harness.scene import load_scene
+from harness.settings import resolve
+
+REPO = Path(__file__).resolve().parents[1]
+MUJOCO = Protocol.of("mujoco")
+
+
+def _rectangle_trials(g1, g2, n: int = 1, sigma_g: float | None = 0.0, seed: int = 0, **overrides):
+    """Trials on the rectangle (0.06 m x 0.03 m); ``sigma_g`` None: the scene's."""
+    scene = load_scene("rectangle")
+    settings = resolve(scene, ({} if sigma_g is None else {"sigma_g": sigma_g}) | overrides)
+    approach = np.random.default_rng(seed).standard_normal((n, 2, 2))
+    return make_trials(settings, [g1, g2], [truth_polygon(scene)], approach)
+
+
+def _closed_slot(trial) -> me._Slot:
+    """A MuJoCo trial stepped until its jaws stall (the lift about to begin)."""
+    slot = me._Slot(me.MujocoRunner(MUJOCO), trial)
+    while slot.phase == "close" and slot.result is None:
+        slot.before_step()
+        mujoco.mj_step(slot.model, slot.data)
+        slot.fresh = False
+        slot.after_step()
+    assert slot.result is None and slot.phase == "lift"
+    return slot
+
+
+def test_the_calibration_grasps_on_the_rectangle_in_mujoco():
+    """As in Bullet (tests/test_physics_trial.py): through the centre under the scene's
+    approach noise it succeeds at least 0.95 of the time (here every one of 20 trials);
+    a grasp that misses is no_contact; jaws placed inside are approach_collision."""
+    good = _rectangle_trials((-0.045, 0.0), (0.045, 0.0), n=20, sigma_g=None)
+    miss = _rectangle_trials((-0.045, 0.03), (0.045, 0.03))
+    inside = _rectangle_trials((-0.02, 0.0), (0.045, 0.0))
+    with make_runner(MUJOCO) as runner:
+        results = runner.run(good + miss + inside)
+    assert [r.outcome for r in results[:20]] == ["success"] * 20
+    assert results[20].outcome == "no_contact"
+    assert results[21].outcome == "approach_collision"
+    for r in results[:20]:
+        assert abs(r.closing_turn) < 0.05
+        assert r.rise == pytest.approx(MUJOCO.lift_height, abs=0.002)  # held: no creep while lifting and shaking
+        assert r.pivot < 0.05  # approach noise holds it a little off its centre of mass
+
+
+def test_the_jaws_squeeze_with_the_force_limit_and_the_pad_has_its_stiffness():
+    """Stalled on the rectangle, each plate's contact forces add up to the gripper's force
+    limit (the damper in its joint pulls nothing at rest), and the plates sink into the
+    0.06 m wide faces as a 2 mm pad of about 1 MPa over a square centimetre would:
+    k = E A / t = 5e4 N/m, 0.2 to 0.6 mm at 20 N (MuJoCo's soft contact is stiffer the
+    deeper it goes, so the stated range is the pad's, not a fitted number)."""
+    force = 20.0
+    slot = _closed_slot(_rectangle_trials((-0.045, 0.0), (0.045, 0.0), force=force)[0])
+    m, d = slot.model, slot.data
+    normal = {jaw: 0.0 for jaw in slot.jaw_geoms}
+    f = np.zeros(6)
+    for k in range(d.ncon):
+        c = d.contact[k]
+        for jaw in slot.jaw_geoms:
+            if jaw in (c.geom1, c.geom2):
+                mujoco.mj_contactForce(m, d, k, f)
+                normal[jaw] += f[0]
+    for total in normal.values():
+        assert total == pytest.approx(force, rel=0.03)
+    sink = (0.06 - slot.grip_width) / 2
+    assert 0.2e-3 < sink < 0.6e-3
+    assert 1e4 < force / sink < 1e5
+
+
+def test_the_model_carries_the_prism_and_the_pad_torsion():
+    """The object's mass and principal inertia are the exact prism's (bodies.py's closed
+    form); the plates' torsional coefficient is (2/3) mu PAD_RADIUS, a disc's under
+    uniform pressure; jaw contacts have condim 4, the table's 3; the elliptic cone."""
+    scene = load_scene("marker")
+    trial = make_trials(resolve(scene), [(0.03, -0.01), (0.02, 0.03)], [truth_polygon(scene)], np.zeros((1, 2, 2)))[0]
+    slot = me._Slot(me.MujocoRunner(MUJOCO), trial)
+    m = slot.model
+    props = prism_mass_properties(trial.polygon, trial.thickness, trial.density)
+    moments, _ = principal_frame(props.inertia)
+    assert m.body_mass[slot.obj] == pytest.approx(props.mass, rel=1e-9)
+    assert sorted(m.body_inertia[slot.obj]) == pytest.approx(sorted(moments), rel=1e-6)
+    assert m.body_ipos[slot.obj] == pytest.approx(props.com, abs=1e-9)
+    for plate in slot.jaw_geoms:
+        mu, torsion, rolling = m.geom_friction[plate]
+        assert mu == pytest.approx(trial.friction)
+        assert torsion == pytest.approx(2 / 3 * trial.friction * me.PAD_RADIUS)
+        assert rolling == 0.0
+        assert m.geom_condim[plate] == me.JAW_CONDIM == 4
+    assert m.geom_condim[m.geom("table").id] == me.TABLE_CONDIM == 3
+    assert m.opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC
+    assert m.opt.timestep == ENGINE_DEFAULTS["mujoco"]["time_step"]
+
+
+def test_a_trial_is_the_same_alone_in_a_batch_and_twice():
+    """One model per trial: a trial's row does not depend on the trials beside it, the
+    batch size or what the runner ran before; bit for bit."""
+    scene = load_scene("marker")
+    from harness import pipeline
+
+    inputs = pipeline.posterior_inputs(pipeline.open_cell(scene, resolve(scene), 3, 0, 6), 6)
+    trials = make_trials(resolve(scene), [[0.033, -0.014], [0.022, 0.034]], inputs.polygons, inputs.approach)
+    with make_runner(MUJOCO, batch_size=4) as runner:
+        together = [repr(r.as_dict()) for r in runner.run(trials)]
+        again = [repr(r.as_dict()) for r in runner.run(trials)]
+    me.compiled.cache_clear()
+    alone = [repr(make_runner(MUJOCO).run([t])[0].as_dict()) for t in reversed(trials)][::-1]
+    assert together == again == alone
+    assert {eval(r)["outcome"] for r in together} - {"approach_collision"}  # some were simulated
+
+
+def test_the_mujoco_engine_refuses_a_gripper_it_cannot_build():
+    from dataclasses import replace
+
+    trial = _rectangle_trials((-0.045, 0.0), (0.045, 0.0))[0]
+    other = replace(trial, gripper=replace(trial.gripper, urdf="/robots/franka_hand.urdf"))
+    with pytest.raises(ValueError, match="built-in parallel-jaw gripper"):
+        make_runner(MUJOCO).run([other])
+
+
+def test_the_engine_is_a_physics_setting(tmp_path, capsys):
+    from harness.config import load_config
+
+    head = 'scenes = ["rectangle"]\n[[planners]]\nname = "mean-shape"\n'
+    plain, mj, bad = (tmp_path / f"{n}.toml" for n in ("plain", "mj", "bad"))
+    plain.write_text(head)
+    mj.write_text(head + '[physics]\nengine = "mujoco"\n')
+    bad.write_text(head + '[physics]\nengine = "ode"\n')
+    explicit = tmp_path / "explicit.toml"
+    explicit.write_text(head + '[physics]\nengine = "pybullet"\n')
+    a, b = load_config(plain), load_config(mj)
+    assert a.physics == {} and a.protocol() == Protocol() and a.engine == "pybullet"
+    assert load_config(explicit).hash == a.hash  # the default engine leaves configs as they were
+    assert b.protocol() == Protocol.of("mujoco") and b.protocol().time_step == ENGINE_DEFAULTS["mujoco"]["time_step"]
+    assert a.with_engine("mujoco").physics == b.physics and a.with_engine("mujoco").name == "plain-mujoco"
+    assert main(["eval", str(bad), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "physics.engine" in err and "'ode'" in err
+
+
+@pytest.fixture(scope="module")
+def quick_runs(tmp_path_factory):
+    """experiments/quick.toml in MuJoCo with 1 and with 2 workers, and in pybullet."""
+    tmp = tmp_path_factory.mktemp("engines")
+    quick = str(REPO / "experiments" / "quick.toml")
+    for name, extra in (("mj1", ["--engine", "mujoco", "--workers", "1"]),
+                        ("mj2", ["--engine", "mujoco", "--workers", "2"]),
+                        ("pb", ["--workers", "2"])):
+        assert main(["eval", quick, "--out", str(tmp / name), *extra]) == 0
+    return tmp
+
+
+def test_mujoco_runs_quick_end_to_end_the_same_with_any_number_of_workers(quick_runs):
+    keys = ["scene", "realisation", "planner", "shapes", "trial"]
+    one, two = (pd.read_parquet(quick_runs / d / "trials.parquet").sort_values(keys).reset_index(drop=True)
+                for d in ("mj1", "mj2"))
+    assert len(one) == 128
+    pd.testing.assert_frame_equal(one, two, check_exact=True)
+    manifest = json.loads((quick_runs / "mj1" / "manifest.json").read_text())
+    assert manifest["engine"] == {"name": "mujoco", "version": mujoco.__version__}
+    assert manifest["config"]["physics"] == {"engine": "mujoco"}
+    assert json.loads((quick_runs / "pb" / "manifest.json").read_text())["engine"]["name"] == "pybullet"
+    for name in ("summary.csv", "calibration.csv", "comparisons.csv", "failures.csv", "summary.md"):
+        assert (quick_runs / "mj1" / name).is_file()
+    assert "Physics: mujoco" in (quick_runs / "mj1" / "summary.md").read_text()
+    assert list((quick_runs / "mj1" / "figures").glob("*.png"))
+
+
+def test_a_cross_engine_comparison_pairs_runs_that_differ_in_the_engine_alone(quick_runs, capsys):
+    pb, mj = str(quick_runs / "pb"), str(quick_runs / "mj1")
+    assert main(["compare", pb, mj, "--engines", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["differences"] == {"physics": [{}, {"engine": "mujoco"}]}
+    assert out["trials"]["paired"] == 128
+    assert all(p["identical"] == p["plans"] for p in out["plans"].values())  # the engine moves no plan
+    assert main(["compare", mj, str(quick_runs / "mj2"), "--engines"]) == 2  # one engine twice
+    assert "needs two engines" in capsys.readouterr().err
+
+
+def test_a_cross_engine_comparison_refuses_any_other_difference(tmp_path, capsys):
+    from test_compare import _config, _keys, _write_run
+
+    outcomes = ["success"] * len(_keys())
+    a = _write_run(tmp_path / "a", _config(), outcomes)
+    b = _write_run(tmp_path / "b", _config(physics={"engine": "mujoco", "lift_height": 0.05}), outcomes)
+    c = _write_run(tmp_path / "c", _config(physics={"engine": "mujoco"}, time_budget_s=99.0), outcomes)
+    d = _write_run(tmp_path / "d", _config(physics={"engine": "mujoco"}, batch_size=64), outcomes)
+    for other, field in ((b, "config.physics"), (c, "config.time_budget_s")):
+        assert main(["compare", str(a), str(other), "--engines"]) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and field in err and "engine alone" in err
+    assert main(["compare", str(a), str(d), "--engines"]) == 0  # batching changes no result
+    assert main(["compare", str(a), str(b)]) == 0  # without --engines any physics change is paired
+
+
+def test_simulate_writes_mujoco_frames(tmp_path, capsys):
+    frames = tmp_path / "frames"
+    assert main(["simulate", "rectangle", "--grasp", "-0.045", "0", "0.045", "0", "--trials", "2",
+                 "--engine", "mujoco", "--frames", str(frames), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["engine"] == "mujoco" and out["successes"] == 2
+    assert sorted(p.name for p in frames.glob("*.png")) == ["1-placed.png", "2-closed.png", "3-lifted.png",
+                                                             "4-shaken.png"]
+
+
+def test_the_base_follows_the_protocols_path_in_mujoco():
+    """The mocap target's path in MuJoCo is the protocol's motion (trial.motion) about the
+    grasp (the lift up to the lift height, the shake's offsets and turns), as
+    TrialMachine.before_step moves Bullet's base."""
+    slot = _closed_slot(_rectangle_trials((-0.045, 0.01), (0.045, -0.01))[0])
+    positions, turns = slot.paths["lift"]
+    assert positions[-1][2] == pytest.approx(slot.base_z + MUJOCO.lift_height, abs=1e-12)
+    assert positions[:, :2] == pytest.approx(np.tile(slot.centre, (len(positions), 1)))
+    heading = 2 * np.arctan2(turns[:, 3], turns[:, 0])
+    assert heading == pytest.approx(np.full(len(turns), slot.heading))
+    shake, shake_turns = slot.paths["shake"]
+    angle = 2 * np.arctan2(shake_turns[:, 3], shake_turns[:, 0]) - slot.heading
+    a, b, turn = np.asarray(slot.motion.shake).T
+    assert angle == pytest.approx(turn, abs=1e-12)
+    offsets = np.hypot(shake[:, 0] - slot.centre[0], shake[:, 1] - slot.centre[1])
+    assert offsets == pytest.approx(np.hypot(a, b), abs=1e-12)
+    assert offsets.max() == pytest.approx(MUJOCO.shake_amplitude, rel=1e-3)
+    assert math.isclose(shake[0, 2], slot.base_z + MUJOCO.lift_height)
