@@ -182,8 +182,8 @@ def create_body(client: int, polygon: Polygon, thickness: float, density: float,
     is the lowest point of the prism (a hull vertex is a vertex of the polygon's bottom
     ring), so where the object touches the table does not change; only how many points
     share its weight when it lies flat (docs/physics.md, "The foot")."""
-    recipe = _recipe(polygon, thickness, density, convex_pieces)
-    path = _mesh_file(recipe.mesh)
+    made = recipe(polygon, thickness, density, convex_pieces)
+    path = _mesh_file(made.mesh)
     try:
         shape = pb.createCollisionShape(pb.GEOM_MESH, fileName=str(path), physicsClientId=client)
     finally:
@@ -191,32 +191,32 @@ def create_body(client: int, polygon: Polygon, thickness: float, density: float,
     look = -1
     if visual:
         vertices, indices = [], []
-        for piece in recipe.pieces:
-            ring = _prism_vertices(piece, 0.0, thickness)
+        for piece in made.pieces:
+            ring = prism_vertices(piece, 0.0, thickness)
             indices += [len(vertices) + i for i in _prism_triangles(len(ring) // 2)]
             vertices += ring
         look = pb.createVisualShape(pb.GEOM_MESH, vertices=vertices, indices=indices, rgbaColor=OBJECT_RGBA,
                                     physicsClientId=client)
     links = {}
     if foot:
-        slab = pb.createCollisionShape(pb.GEOM_MESH, vertices=recipe.foot, physicsClientId=client)
+        slab = pb.createCollisionShape(pb.GEOM_MESH, vertices=made.foot, physicsClientId=client)
         links = dict(linkMasses=[0.0], linkCollisionShapeIndices=[slab], linkVisualShapeIndices=[-1],
                      linkPositions=[[0.0, 0.0, 0.0]], linkOrientations=[[0.0, 0.0, 0.0, 1.0]],
                      linkInertialFramePositions=[[0.0, 0.0, 0.0]], linkInertialFrameOrientations=[[0.0, 0.0, 0.0, 1.0]],
                      linkParentIndices=[0], linkJointTypes=[pb.JOINT_FIXED], linkJointAxis=[[0.0, 0.0, 1.0]])
-    body = pb.createMultiBody(baseMass=recipe.props.mass, baseCollisionShapeIndex=shape, baseVisualShapeIndex=look,
+    body = pb.createMultiBody(baseMass=made.props.mass, baseCollisionShapeIndex=shape, baseVisualShapeIndex=look,
                               basePosition=[float(origin[0]), float(origin[1]), 0.0],
-                              baseInertialFramePosition=recipe.props.com.tolist(),
-                              baseInertialFrameOrientation=recipe.principal_axes, physicsClientId=client, **links)
-    pb.changeDynamics(body, -1, localInertiaDiagonal=recipe.moments, lateralFriction=friction,
+                              baseInertialFramePosition=made.props.com.tolist(),
+                              baseInertialFrameOrientation=made.principal_axes, physicsClientId=client, **links)
+    pb.changeDynamics(body, -1, localInertiaDiagonal=made.moments, lateralFriction=friction,
                       physicsClientId=client)
     if foot:
         pb.changeDynamics(body, 0, lateralFriction=friction, physicsClientId=client)
-    return Body(body, polygon, recipe.pieces, recipe.props, 0 if foot else None)
+    return Body(body, polygon, made.pieces, made.props, 0 if foot else None)
 
 
 @dataclass(frozen=True)
-class _Recipe:
+class Recipe:
     """Everything a body is built from that depends only on its shape: the convex
     pieces, the compound's OBJ text, the mass properties, the principal moments and the
     principal axes (a quaternion), and the vertices of the foot slab."""
@@ -230,7 +230,7 @@ class _Recipe:
 
 
 @lru_cache(maxsize=256)
-def _recipe(polygon: Polygon, thickness: float, density: float, decompose) -> _Recipe:
+def recipe(polygon: Polygon, thickness: float, density: float, decompose) -> Recipe:
     """Built once per process for each shape: an experiment executes every posterior
     sample once per planner and the true shape in every truth trial. Keyed by the exact
     polygon and by the decomposition function itself (so a test that swaps the
@@ -241,8 +241,8 @@ def _recipe(polygon: Polygon, thickness: float, density: float, decompose) -> _R
     moments, axes = principal_frame(props.inertia)
     hull, margin = _core(polygon.convex_hull, thickness)
     z0 = min(margin, 0.25 * thickness)
-    foot = _prism_vertices(hull, z0, z0 + min(FOOT_HEIGHT, thickness - 2 * z0))
-    return _Recipe(pieces, mesh, props, moments, axes, foot)
+    foot = prism_vertices(hull, z0, z0 + min(FOOT_HEIGHT, thickness - 2 * z0))
+    return Recipe(pieces, mesh, props, moments, axes, foot)
 
 
 def _compound_text(cores: list, thickness: float) -> str:
@@ -252,7 +252,7 @@ def _compound_text(cores: list, thickness: float) -> str:
     lines, base = [], 1
     for k, (core, margin) in enumerate(cores):
         z0 = min(margin, 0.25 * thickness)  # prisms thinner than 4 mm come out up to 2 mm thick
-        ring = _prism_vertices(core, z0, thickness - z0)
+        ring = prism_vertices(core, z0, thickness - z0)
         lines.append(f"o piece{k}")
         lines += [f"v {x:.9g} {y:.9g} {z:.9g}" for x, y, z in ring]
         tris = _prism_triangles(len(ring) // 2)
@@ -284,7 +284,7 @@ def _core(piece: Polygon, thickness: float) -> tuple[Polygon, float]:
     return piece, margin
 
 
-def _prism_vertices(piece: Polygon, z0: float, z1: float) -> list:
+def prism_vertices(piece: Polygon, z0: float, z1: float) -> list:
     """Bottom ring (counter-clockwise) then top ring of the prism over a convex piece."""
     ring = np.asarray(shapely.geometry.polygon.orient(piece, 1.0).exterior.coords)[:-1]
     return np.concatenate([np.column_stack([ring, np.full(len(ring), z0)]),

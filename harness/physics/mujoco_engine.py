@@ -27,10 +27,9 @@ from typing import Callable, Sequence
 
 import mujoco
 import numpy as np
-import shapely
 from shapely.geometry import Polygon
 
-from harness.physics.bodies import convex_pieces, principal_frame, prism_mass_properties
+from harness.physics.bodies import FOOT_HEIGHT, convex_pieces, prism_vertices, recipe
 from harness.physics.gripper import PALM_MASS, PALM_THICKNESS, PLATE_MASS
 from harness.physics.trial import (MAX_BATCH, TABLE_GAP, Trial, TrialMachine, TrialResult, prechecked,
                                    skipped_travel, yaw)
@@ -142,7 +141,10 @@ class MujocoRunner:
 
 
 class _Slot(TrialMachine):
-    """One trial's model, data and state machine."""
+    """One trial's model, data and state machine. The gripper's target follows paths
+    computed once per trial (:meth:`_paths`) instead of :meth:`TrialMachine.move` at
+    every step, so that steps that decide nothing run without the machine
+    (:meth:`advance`)."""
 
     def __init__(self, runner: MujocoRunner, trial: Trial, camera=None):
         super().__init__(0, trial, runner.protocol, runner.early_stop)
@@ -160,7 +162,6 @@ class _Slot(TrialMachine):
         self.fresh = False
         body = m.body
         self.obj = body("object").id
-        self.palm = body("palm").id
         jnt = m.joint
         self.obj_qpos = m.jnt_qposadr[jnt("object").id]
         self.obj_dof = m.jnt_dofadr[jnt("object").id]
@@ -299,11 +300,6 @@ def _floats(values) -> str:
     return " ".join(f"{float(v):.12g}" for v in values)
 
 
-def _prism(piece: Polygon, z0: float, z1: float) -> list:
-    ring = np.asarray(shapely.geometry.polygon.orient(piece, 1.0).exterior.coords)[:-1]
-    return [*((x, y, z0) for x, y in ring), *((x, y, z1) for x, y in ring)]
-
-
 @lru_cache(maxsize=256)
 def object_xml(polygon: Polygon, thickness: float, density: float, foot: bool) -> tuple[str, str]:
     """The object's mesh assets and its body (MJCF), in the polygon's frame: each convex
@@ -311,18 +307,15 @@ def object_xml(polygon: Polygon, thickness: float, density: float, foot: bool) -
     thickness (MuJoCo's convex geoms have no margin to shrink for), and with ``foot``
     a slab over the convex hull at the bottom that alone meets the table (as in Bullet,
     docs/physics.md "The foot"). The inertial is the exact prism's, in its principal frame."""
-    pieces = convex_pieces(polygon)
-    props = prism_mass_properties(polygon, thickness, density)
-    moments, (qx, qy, qz, qw) = principal_frame(props.inertia)
+    shape = recipe(polygon, thickness, density, convex_pieces)  # Bullet's pieces and mass properties
+    props, moments, (qx, qy, qz, qw) = shape.props, shape.moments, shape.principal_axes
     assets, geoms = [], []
-    for k, piece in enumerate(pieces):
-        assets.append(f'<mesh name="piece{k}" vertex="{_floats(np.ravel(_prism(piece, 0.0, thickness)))}"/>')
+    for k, piece in enumerate(shape.pieces):
+        assets.append(f'<mesh name="piece{k}" vertex="{_floats(np.ravel(prism_vertices(piece, 0.0, thickness)))}"/>')
         geoms.append(f'<geom name="piece{k}" type="mesh" mesh="piece{k}" contype="1" '
                      f'conaffinity="{0 if foot else 2}" group="1"/>')
     if foot:
-        from harness.physics.bodies import FOOT_HEIGHT
-
-        slab = _prism(polygon.convex_hull, 0.0, min(FOOT_HEIGHT, 0.5 * thickness))
+        slab = prism_vertices(polygon.convex_hull, 0.0, min(FOOT_HEIGHT, 0.5 * thickness))
         assets.append(f'<mesh name="foot" vertex="{_floats(np.ravel(slab))}"/>')
         geoms.append('<geom name="foot" type="mesh" mesh="foot" contype="0" conaffinity="2" group="3"/>')
     body = (f'<body name="object"><freejoint name="object"/>'
