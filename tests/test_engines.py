@@ -243,3 +243,28 @@ def test_the_base_follows_the_protocols_path_in_mujoco():
     assert offsets == pytest.approx(np.hypot(a, b), abs=1e-12)
     assert offsets.max() == pytest.approx(MUJOCO.shake_amplitude, rel=1e-3)
     assert math.isclose(shake[0, 2], slot.base_z + MUJOCO.lift_height)
+
+
+def test_the_engines_study_reports_the_runs_own_counts(quick_runs, tmp_path):
+    """bench engines' study of two runs: its trial agreement, per-planner success and
+    plan count are the trials' own (recomputed here from the runs' parquet files), every
+    comparison of the report appears under both engines, and the text prints."""
+    from harness.bench.engines_study import format_lines, study
+
+    res = study(quick_runs / "pb", quick_runs / "mj1", frames=tmp_path / "frames")
+    keys = ["scene", "realisation", "planner", "shapes", "trial"]
+    a, b = (pd.read_parquet(quick_runs / d / "trials.parquet") for d in ("pb", "mj1"))
+    both = a.merge(b, on=keys, suffixes=("_a", "_b"))
+    assert res["trials"] == len(both) == 128
+    assert res["trial_agreement"]["all"] == pytest.approx((both.outcome_a == both.outcome_b).mean(), abs=1e-12)
+    assert res["identical_plans"] == {"paired": 8, "same": 8}
+    for p in res["planners"]:
+        for k, run in enumerate((a, b)):
+            post = run[(run.planner == p["planner"]) & (run.shapes == "posterior")]
+            assert p["posterior"][k] == pytest.approx((post.outcome == "success").mean(), abs=1e-12)
+    report = pd.read_csv(quick_runs / "pb" / "comparisons.csv")
+    pairs = {(r.planner, r.versus) for r in report.itertuples()}
+    assert {(c["planner"], c["versus"]) for c in res["comparisons"]} == pairs
+    assert res["engines"] == ["pybullet", "mujoco"]
+    text = "\n".join(format_lines(res))
+    assert "pybullet 3.2.7 against mujoco" in text and "paired trials" in text
