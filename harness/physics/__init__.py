@@ -1,5 +1,5 @@
-"""Physics trials in pybullet: extruded shapes, a parallel-jaw gripper, one trial, and
-batches of trials."""
+"""Physics trials: extruded shapes, a parallel-jaw gripper, one trial and its rules
+(engine-neutral), and the engines that run it: pybullet (the default) and MuJoCo."""
 
 import ctypes
 import os

@@ -11,13 +11,13 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import Sequence
 
 import numpy as np
 import pybullet as pb
 
 from harness.physics.bodies import create_body
-from harness.physics.trial import (MAX_BATCH, TABLE_GAP, Trial, TrialMachine, TrialResult,
+from harness.physics.trial import (TABLE_GAP, BatchRunner, Trial, TrialMachine, TrialResult,
                                    prechecked, skipped_travel, yaw)
 from harness.protocol import Protocol
 
@@ -28,24 +28,13 @@ SLOT_SPACING = 2.0
 BASE_FORCE = 2000.0
 
 
-class BulletRunner:
+class BulletRunner(BatchRunner):
     """Runs trials in batches in one pybullet client, kept for the runner's life (one
-    per worker process). ``early_stop`` ends a trial as soon as its outcome is decided;
-    without it every simulated trial runs the whole protocol (the naive reference)."""
+    per worker process); each batch is one world."""
 
     def __init__(self, protocol: Protocol | None = None, batch_size: int = 16, early_stop: bool = True):
-        if not 1 <= batch_size <= MAX_BATCH:
-            raise ValueError(f"batch_size must be 1 to {MAX_BATCH}")
-        self.protocol = protocol or Protocol()
-        self.batch_size = batch_size
-        self.early_stop = early_stop
+        super().__init__(protocol or Protocol(), batch_size, early_stop)
         self._client: int | None = None
-
-    def __enter__(self) -> "BulletRunner":
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
 
     def close(self) -> None:
         if self._client is not None:
@@ -57,19 +46,6 @@ class BulletRunner:
         if self._client is None:
             self._client = pb.connect(pb.DIRECT)
         return self._client
-
-    def run(self, trials: Sequence[Trial], frames: Path | None = None,
-            progress: Callable[[int], None] | None = None) -> list[TrialResult]:
-        """Outcomes of the trials, in order. ``frames``: a folder for PNG snapshots of
-        each phase of the first trial. ``progress`` is called with each batch's size."""
-        results: list[TrialResult] = []
-        for start in range(0, len(trials), self.batch_size):
-            batch = trials[start:start + self.batch_size]
-            camera = _Camera(Path(frames), self.client) if frames is not None and start == 0 else None
-            results.extend(self._run_batch(batch, camera))
-            if progress:
-                progress(len(batch))
-        return results
 
     # -- one world ---------------------------------------------------------------------
 
@@ -84,7 +60,8 @@ class BulletRunner:
         self.table = pb.createMultiBody(0, plane, physicsClientId=c)
         pb.changeDynamics(self.table, -1, lateralFriction=p.table_friction, physicsClientId=c)
 
-    def _run_batch(self, batch: Sequence[Trial], camera: "_Camera | None") -> list[TrialResult]:
+    def _run_batch(self, batch: Sequence[Trial], frames: Path | None) -> list[TrialResult]:
+        camera = _Camera(frames, self.client) if frames is not None else None
         self._reset_world()
         if camera is not None:
             camera.add_table()

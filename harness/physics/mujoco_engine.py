@@ -23,7 +23,7 @@ from __future__ import annotations
 import math
 from functools import lru_cache
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import Sequence
 
 import mujoco
 import numpy as np
@@ -31,7 +31,7 @@ from shapely.geometry import Polygon
 
 from harness.physics.bodies import FOOT_HEIGHT, convex_pieces, prism_vertices, recipe
 from harness.physics.gripper import PALM_MASS, PALM_THICKNESS, PLATE_MASS
-from harness.physics.trial import (MAX_BATCH, TABLE_GAP, Trial, TrialMachine, TrialResult, prechecked,
+from harness.physics.trial import (TABLE_GAP, BatchRunner, Trial, TrialMachine, TrialResult, prechecked,
                                    skipped_travel, yaw)
 from harness.protocol import Protocol
 
@@ -83,43 +83,18 @@ def contact_timeconst(protocol: Protocol) -> float:
     return max(CONTACT_TIMECONST, 2.0 * protocol.time_step)
 
 
-class MujocoRunner:
-    """Runs trials in MuJoCo, one model per trial. ``batch_size`` only groups the
-    progress callbacks (the models are independent); ``early_stop`` as in Bullet."""
+class MujocoRunner(BatchRunner):
+    """Runs trials in MuJoCo, one model per trial: a batch is only a group of trials
+    (the models are independent)."""
 
     def __init__(self, protocol: Protocol | None = None, batch_size: int = 16, early_stop: bool = True):
-        if not 1 <= batch_size <= MAX_BATCH:
-            raise ValueError(f"batch_size must be 1 to {MAX_BATCH}")
-        self.protocol = protocol or Protocol.of("mujoco")
-        self.batch_size = batch_size
-        self.early_stop = early_stop
+        super().__init__(protocol or Protocol.of("mujoco"), batch_size, early_stop)
 
-    def __enter__(self) -> "MujocoRunner":
-        return self
+    def _run_batch(self, batch: Sequence[Trial], frames: Path | None) -> list[TrialResult]:
+        from harness.physics.frames import Frames
 
-    def __exit__(self, *exc) -> None:
-        self.close()
-
-    def close(self) -> None:
-        pass
-
-    def run(self, trials: Sequence[Trial], frames: Path | None = None,
-            progress: Callable[[int], None] | None = None) -> list[TrialResult]:
-        """Outcomes of the trials, in order. ``frames``: a folder for PNG snapshots of
-        each phase of the first trial. ``progress`` is called with each batch's size."""
-        results: list[TrialResult] = []
-        for start in range(0, len(trials), self.batch_size):
-            batch = trials[start:start + self.batch_size]
-            for k, trial in enumerate(batch):
-                camera = None
-                if frames is not None and start == 0 and k == 0:
-                    from harness.physics.frames import Frames
-
-                    camera = Frames(Path(frames))
-                results.append(self.run_one(trial, camera))
-            if progress:
-                progress(len(batch))
-        return results
+        return [self.run_one(trial, Frames(frames) if frames is not None and k == 0 else None)
+                for k, trial in enumerate(batch)]
 
     def run_one(self, trial: Trial, camera=None) -> TrialResult:
         early = prechecked(trial)

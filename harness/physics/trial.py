@@ -23,6 +23,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from functools import lru_cache
+from pathlib import Path
 
 import numpy as np
 import shapely
@@ -174,6 +175,45 @@ def skipped_travel(trial: Trial, protocol: Protocol) -> float:
     return max(0.0, min(free_travel(trial), 0.5 * math.dist(trial.g1, trial.g2)) - SKIP_MARGIN)
 
 
+class BatchRunner:
+    """What every engine's runner shares: the protocol, the batch size (1 to MAX_BATCH),
+    early stopping (a trial ends as soon as its outcome is decided; without it every
+    simulated trial runs the whole protocol, the naive reference), the context manager,
+    and :meth:`run`, which hands the trials to the engine's ``_run_batch`` in batches
+    fixed by their order."""
+
+    def __init__(self, protocol: Protocol, batch_size: int = 16, early_stop: bool = True):
+        if not 1 <= batch_size <= MAX_BATCH:
+            raise ValueError(f"batch_size must be 1 to {MAX_BATCH}")
+        self.protocol = protocol
+        self.batch_size = batch_size
+        self.early_stop = early_stop
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Release what the engine holds (nothing by default)."""
+
+    def run(self, trials, frames: Path | None = None, progress=None) -> list[TrialResult]:
+        """Outcomes of the trials, in order. ``frames``: a folder for PNG snapshots of
+        each phase of the first trial. ``progress`` is called with each batch's size."""
+        results: list[TrialResult] = []
+        for start in range(0, len(trials), self.batch_size):
+            batch = trials[start:start + self.batch_size]
+            results.extend(self._run_batch(batch, Path(frames) if frames is not None and start == 0 else None))
+            if progress:
+                progress(len(batch))
+        return results
+
+    def _run_batch(self, batch, frames: Path | None) -> list[TrialResult]:
+        """The batch's results; ``frames``: where the first trial's snapshots go, if anywhere."""
+        raise NotImplementedError
+
+
 def prechecked(trial: Trial) -> TrialResult | None:
     """The outcome of a trial decided without simulating: ``empty_shape`` for a sample
     with no inside region, ``approach_collision`` when a jaw pad comes down on the
@@ -261,7 +301,7 @@ class TrialMachine:
     def undecided_steps(self) -> int:
         """How many of the next steps decide nothing (the step after them may): an
         engine may run them without calling :meth:`after_step` if it calls
-        :meth:`ticked` for them. None while closing, where every step is checked."""
+        :meth:`ticked` for them. 0 while closing, where every step is checked."""
         if self.phase == "close" or self.result is not None:
             return 0
         c = self.check_steps
