@@ -33,23 +33,31 @@ class Frames:
         from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
         m, d = slot.model, slot.data
+        elev, azim = 35.0, math.degrees(slot.heading) - 55.0
         fig = plt.figure(figsize=(6.4, 4.8))
-        ax = fig.add_subplot(projection="3d")
+        # Painted from the farthest geom to the nearest, the table first: matplotlib sorts
+        # the faces within one collection only, and would paint the table over the object.
+        ax = fig.add_subplot(projection="3d", computed_zorder=False)
         cx, cy = slot.centre
+        table = [[(cx - VIEW_HALF, cy - VIEW_HALF, 0), (cx + VIEW_HALF, cy - VIEW_HALF, 0),
+                  (cx + VIEW_HALF, cy + VIEW_HALF, 0), (cx - VIEW_HALF, cy + VIEW_HALF, 0)]]
+        ax.add_collection3d(Poly3DCollection(table, facecolor=(0.8, 0.82, 0.78, 0.6)))
+        e, a = math.radians(elev), math.radians(azim)
+        towards = np.array([math.cos(e) * math.cos(a), math.cos(e) * math.sin(a), math.sin(e)])
+        drawn = []
         for geom in range(m.ngeom):
             if m.geom(geom).name in ("table", "foot"):
                 continue
             faces = _faces(m, d, geom)
             colour = OBJECT_RGBA if m.geom_bodyid[geom] == slot.obj else GRIPPER_RGBA
+            drawn.append((float(np.mean([f.mean(axis=0) @ towards for f in faces])), faces, colour))
+        for _, faces, colour in sorted(drawn, key=lambda item: item[0]):
             ax.add_collection3d(Poly3DCollection(faces, facecolor=colour, edgecolor=(0, 0, 0, 0.25), linewidths=0.3))
-        table = [[(cx - VIEW_HALF, cy - VIEW_HALF, 0), (cx + VIEW_HALF, cy - VIEW_HALF, 0),
-                  (cx + VIEW_HALF, cy + VIEW_HALF, 0), (cx - VIEW_HALF, cy + VIEW_HALF, 0)]]
-        ax.add_collection3d(Poly3DCollection(table, facecolor=(0.8, 0.82, 0.78, 0.6)))
         ax.set_xlim(cx - VIEW_HALF, cx + VIEW_HALF)
         ax.set_ylim(cy - VIEW_HALF, cy + VIEW_HALF)
         ax.set_zlim(0.0, 2 * VIEW_HALF)
         ax.set_box_aspect((1, 1, 1))
-        ax.view_init(elev=35, azim=math.degrees(slot.heading) - 55)
+        ax.view_init(elev=elev, azim=azim)
         ax.set_axis_off()
         ax.set_title(f"MuJoCo: {name}")
         fig.savefig(self.folder / f"{name}.png", dpi=100)
