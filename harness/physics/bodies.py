@@ -183,7 +183,8 @@ def create_body(client: int, polygon: Polygon, thickness: float, density: float,
     ring), so where the object touches the table does not change; only how many points
     share its weight when it lies flat (docs/physics.md, "The foot")."""
     made = recipe(polygon, thickness, density, convex_pieces)
-    path = _mesh_file(made.mesh)
+    mesh, foot_vertices = _bullet_meshes(polygon, thickness, density, convex_pieces)
+    path = _mesh_file(mesh)
     try:
         shape = pb.createCollisionShape(pb.GEOM_MESH, fileName=str(path), physicsClientId=client)
     finally:
@@ -199,7 +200,7 @@ def create_body(client: int, polygon: Polygon, thickness: float, density: float,
                                     physicsClientId=client)
     links = {}
     if foot:
-        slab = pb.createCollisionShape(pb.GEOM_MESH, vertices=made.foot, physicsClientId=client)
+        slab = pb.createCollisionShape(pb.GEOM_MESH, vertices=foot_vertices, physicsClientId=client)
         links = dict(linkMasses=[0.0], linkCollisionShapeIndices=[slab], linkVisualShapeIndices=[-1],
                      linkPositions=[[0.0, 0.0, 0.0]], linkOrientations=[[0.0, 0.0, 0.0, 1.0]],
                      linkInertialFramePositions=[[0.0, 0.0, 0.0]], linkInertialFrameOrientations=[[0.0, 0.0, 0.0, 1.0]],
@@ -217,16 +218,14 @@ def create_body(client: int, polygon: Polygon, thickness: float, density: float,
 
 @dataclass(frozen=True)
 class Recipe:
-    """Everything a body is built from that depends only on its shape: the convex
-    pieces, the compound's OBJ text, the mass properties, the principal moments and the
-    principal axes (a quaternion), and the vertices of the foot slab."""
+    """What a body is built from that depends only on its shape, in every engine: the
+    convex pieces, the mass properties, the principal moments and the principal axes (a
+    quaternion)."""
 
     pieces: tuple
-    mesh: str
     props: MassProperties
     moments: list
     principal_axes: list
-    foot: list
 
 
 @lru_cache(maxsize=256)
@@ -236,13 +235,20 @@ def recipe(polygon: Polygon, thickness: float, density: float, decompose) -> Rec
     polygon and by the decomposition function itself (so a test that swaps the
     decomposition never sees a body built by another)."""
     pieces = tuple(decompose(polygon))
-    mesh = _compound_text([_core(piece, thickness) for piece in pieces], thickness)
     props = prism_mass_properties(polygon, thickness, density)
     moments, axes = principal_frame(props.inertia)
+    return Recipe(pieces, props, moments, axes)
+
+
+@lru_cache(maxsize=256)
+def _bullet_meshes(polygon: Polygon, thickness: float, density: float, decompose) -> tuple[str, list]:
+    """Bullet's collision geometry of a shape, once per process: the compound's OBJ text
+    (the pieces shrunk by the collision margin) and the vertices of the foot slab."""
+    pieces = recipe(polygon, thickness, density, decompose).pieces
+    mesh = _compound_text([_core(piece, thickness) for piece in pieces], thickness)
     hull, margin = _core(polygon.convex_hull, thickness)
     z0 = min(margin, 0.25 * thickness)
-    foot = prism_vertices(hull, z0, z0 + min(FOOT_HEIGHT, thickness - 2 * z0))
-    return Recipe(pieces, mesh, props, moments, axes, foot)
+    return mesh, prism_vertices(hull, z0, z0 + min(FOOT_HEIGHT, thickness - 2 * z0))
 
 
 def _compound_text(cores: list, thickness: float) -> str:

@@ -134,12 +134,16 @@ class _Slot(TrialMachine):
                               gripper_xml(g, t.friction), options_xml(p))
         m = self.model
         self.data = d = mujoco.MjData(m)
+        self.mocap_pos, self.mocap_quat = d.mocap_pos[0], d.mocap_quat[0]
         self.fresh = False
         body = m.body
         self.obj = body("object").id
         jnt = m.joint
         self.obj_qpos = m.jnt_qposadr[jnt("object").id]
         self.obj_dof = m.jnt_dofadr[jnt("object").id]
+        # Views of the object's free joint: position and velocity (linear, angular).
+        self.obj_position = d.qpos[self.obj_qpos:self.obj_qpos + 3]
+        self.obj_velocity = d.qvel[self.obj_dof:self.obj_dof + 6]
         self.palm_qpos = m.jnt_qposadr[jnt("palm").id]
         self.finger_qpos = [m.jnt_qposadr[jnt(f"jaw_{k + 1}").id] for k in range(2)]
         self.finger_dof = [m.jnt_dofadr[jnt(f"jaw_{k + 1}").id] for k in range(2)]
@@ -175,8 +179,8 @@ class _Slot(TrialMachine):
         computed once per trial (:meth:`_paths`)."""
         path = self.paths.get(self.phase)
         if path is not None:
-            self.data.mocap_pos[0] = path[0][self.tick]
-            self.data.mocap_quat[0] = path[1][self.tick]
+            self.mocap_pos[:] = path[0][self.tick]
+            self.mocap_quat[:] = path[1][self.tick]
 
     def advance(self, steps: int) -> None:
         """Run ``steps`` steps that decide nothing: along the path, or in one call to
@@ -187,10 +191,11 @@ class _Slot(TrialMachine):
             mujoco.mj_step(m, d, steps)
         else:
             positions, turns = path
+            position, turn, step = self.mocap_pos, self.mocap_quat, mujoco.mj_step
             for k in range(self.tick, self.tick + steps):
-                d.mocap_pos[0] = positions[k]
-                d.mocap_quat[0] = turns[k]
-                mujoco.mj_step(m, d)
+                position[:] = positions[k]
+                turn[:] = turns[k]
+                step(m, d)
         self.fresh = False
         self.ticked(steps)
 
@@ -235,9 +240,9 @@ class _Slot(TrialMachine):
 
     def blew_up(self) -> bool:
         """With MuJoCo's automatic reset off (options_xml), a diverged state stays NaN."""
-        p, d = self.protocol, self.data
-        vx, vy, vz, wx, wy, wz = d.qvel[self.obj_dof:self.obj_dof + 6].tolist()
-        x, y, z = d.qpos[self.obj_qpos:self.obj_qpos + 3].tolist()
+        p = self.protocol
+        vx, vy, vz, wx, wy, wz = self.obj_velocity.tolist()
+        x, y, z = self.obj_position.tolist()
         if not all(map(math.isfinite, (x, y, z, vx, vy, vz, wx, wy, wz))):
             return True
         return math.hypot(vx, vy, vz) > p.max_speed or math.hypot(wx, wy, wz) > p.max_spin
