@@ -4,8 +4,8 @@ Each trial is one MuJoCo model, compiled from MJCF text written here: the table 
 plane), the object (a free body whose collision geoms are the same convex pieces as in
 Bullet, extruded, with the exact mass, centre of mass and principal inertia of the whole
 prism, and the foot when the protocol has one), and the parallel jaw (a palm welded to a
-mocap body that the protocol drives, two plates on prismatic joints, each closed by a
-force-limited velocity servo). The state machine and every outcome's rule are the
+mocap body that the protocol drives, two plates on prismatic joints, each pressed by
+the force limit against a damper that sets the closing speed). The state machine and every outcome's rule are the
 engine-neutral ones of :class:`harness.physics.trial.TrialMachine`.
 
 The contact parameters are chosen from MuJoCo's documentation and from the physics of a
@@ -53,27 +53,18 @@ PAD_RADIUS = 0.002
 #: contacts are soft: at the default 1 a static friction force is held with a creep
 #: velocity proportional to it, so a grasped object slides slowly out of any grip. Coulomb
 #: static friction does not creep; MuJoCo's documentation recommends raising impratio to
-#: make friction harder without changing the coefficient. 10 removes creep on the
-#: held-bar checks (tests) while leaving the solver's convergence unchanged.
+#: make friction harder without changing the coefficient. From 10 on the outcomes stop
+#: moving (100 changes 1 of 240 fidelity trials, 1 changes 31; docs/physics.md, "MuJoCo").
 IMPRATIO = 10.0
-#: Contact softness: solref's time constant (s) and damping ratio. A rubber pad of a
-#: square centimetre, 2 mm thick, with Young's modulus about 2 MPa is a spring of about
-#: 1e5 N/m: on a 0.1 kg object its period is near 6 ms, too fast for a 2 ms step. So the
-#: contacts are as stiff as the step resolves: MuJoCo's documentation asks for a time
-#: constant of at least two steps; 5 ms (2.5 steps), critically damped. Fixed in
-#: seconds, so that a finer step (the fidelity study) does not change the physics.
+#: Contact softness: solref's time constant (s) and damping ratio, the pad's stiffness.
+#: With 4 ms a plate at 20 N sinks 0.2-0.6 mm into the object (tested), about 5e4 N/m:
+#: k = E A / t of a 2 mm silicone-rubber pad (E about 1 MPa) over a square centimetre.
+#: 4 ms is also two steps of 2 ms, the stiffest MuJoCo's documentation allows at that
+#: step. Fixed in seconds, so that a finer step (the fidelity study) keeps the physics.
 CONTACT_TIMECONST = 0.004
 CONTACT_DAMPRATIO = 1.0
 #: The weld that carries the palm along the protocol's path: as stiff as the contacts.
 WELD_TIMECONST = 0.004
-#: How each jaw closes: a constant force, the gripper's force limit, against a viscous
-#: damper of force / closing speed (N s/m) in its joint. Free, the jaw closes at the
-#: closing speed (reached in a tenth of a millisecond); held by the object, it pushes
-#: with exactly the force limit, as Bullet's finger motor does once it stalls. The damper
-#: is integrated implicitly (implicitfast). A soft mechanism in its place (a carriage
-#: driving the plate through a slide joint's dry friction, a constraint as soft as the
-#: contacts) squeezed with less than the limit while the plates were still and let a
-#: third of the library's held objects slip (docs/physics.md, "MuJoCo").
 #: The table's size (m): a plane; only its visual extent depends on it.
 TABLE_HALF = 1.0
 
@@ -131,7 +122,7 @@ class _Slot(TrialMachine):
         heading = math.atan2(t.axis[1], t.axis[0]) - math.atan2(g.closing_axis[1], g.closing_axis[0])
         base_z = g.depth + TABLE_GAP
         self.model = compiled(object_xml(t.polygon, t.thickness, t.density, p.table_hull),
-                              gripper_xml(g, t.friction), options_xml(p))
+                              gripper_xml(g, t.friction), options_xml(p), p.table_friction)
         m = self.model
         self.data = d = mujoco.MjData(m)
         self.mocap_pos, self.mocap_quat = d.mocap_pos[0], d.mocap_quat[0]
@@ -311,13 +302,20 @@ def _turn(heading: float) -> tuple[float, float, float, float]:
 
 def gripper_xml(g, friction: float) -> str:
     """The palm (welded to the mocap body ``target``), the two plates on prismatic
-    joints and their servos, from the built-in gripper's adapter (harness.physics.gripper),
+    joints and their motors, from the built-in gripper's adapter (harness.physics.gripper),
     at the origin (each trial places it through the state: one model serves every trial
     of a shape)."""
     half, t, w, length = g.face_at_zero[1], g.pad_thickness, g.pad_width, g.depth
     torsion = 2.0 / 3.0 * friction * PAD_RADIUS
     palm = (half + t, max(w, 0.02) / 2, PALM_THICKNESS / 2)
     plate = (t / 2, w / 2, length / 2)
+    # Each jaw closes under a constant force, the gripper's force limit, against a viscous
+    # damper of force / closing speed in its joint: free, it closes at the closing speed
+    # (reached in a tenth of a millisecond); held by the object, it presses with exactly
+    # the force limit, as Bullet's finger motor does once it stalls (tested). The damper
+    # is integrated implicitly (implicitfast). A carriage driving the plate through a
+    # joint's dry friction squeezed with less: MuJoCo's dry friction is as soft as its
+    # contacts (docs/physics.md, "MuJoCo").
     damping = g.force / g.closing_speed
     jaws = []
     for k, sign in ((1, -1), (2, 1)):
@@ -346,26 +344,25 @@ def gripper_xml(g, friction: float) -> str:
 def options_xml(p: Protocol) -> str:
     """The simulation options: the protocol's step and iterations; Newton's solver;
     the elliptic cone (pyramidal without ``cone_friction``); implicit integration of the
-    servos' damping; several contacts between convex geoms (multiccd), so that a plate
+    plates' dampers; several contacts between convex geoms (multiccd), so that a plate
     flat on a wall is held over a patch, not at one point."""
     cone = "elliptic" if p.cone_friction else "pyramidal"
     tc = contact_timeconst(p)
     return (f'<option timestep="{p.time_step:.12g}" iterations="{p.solver_iterations}" solver="Newton" '
             f'cone="{cone}" impratio="{IMPRATIO:.12g}" integrator="implicitfast" gravity="0 0 -9.81">'
             f'<flag multiccd="enable" autoreset="disable"/></option>'
-            f'<default><geom solref="{tc:.12g} {CONTACT_DAMPRATIO:.12g}"/></default>'), p.table_friction
+            f'<default><geom solref="{tc:.12g} {CONTACT_DAMPRATIO:.12g}"/></default>')
 
 
 @lru_cache(maxsize=128)
-def compiled(obj: tuple[str, str], gripper: str, options: tuple[str, float]) -> mujoco.MjModel:
+def compiled(obj: tuple[str, str], gripper: str, options: str, table_friction: float) -> mujoco.MjModel:
     """The trial's model from its parts' MJCF, compiled once per process for each shape,
     gripper and protocol (a compile takes 4-10 ms; an experiment executes each posterior
     sample once per planner and the true shape in every truth trial). Never changed
     after compiling: every trial gets fresh data (MjData) of its own."""
     assets, body = obj
-    option_text, table_friction = options
     xml = (f'<mujoco model="gpis-harness trial"><compiler angle="radian" inertiafromgeom="false"/>'
-           f'{option_text}<asset>{assets}</asset><worldbody>'
+           f'{options}<asset>{assets}</asset><worldbody>'
            f'<geom name="table" type="plane" size="{TABLE_HALF} {TABLE_HALF} 0.1" contype="2" conaffinity="0" '
            f'condim="{TABLE_CONDIM}" priority="1" friction="{table_friction:.12g} 0 0" rgba="0.8 0.82 0.78 1"/>'
            f'{body}{gripper}</mujoco>')

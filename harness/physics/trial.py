@@ -1,6 +1,6 @@
 """Physics trials, whatever the engine: one trial's inputs and result, the outcomes and
 their taxonomy, the geometric checks made before simulating, the base's motion after
-the jaws stall, and and the engine-neutral state machine (:class:`TrialMachine`).
+the jaws stall, and the engine-neutral state machine (:class:`TrialMachine`).
 
 A trial: the object (a polygon extruded to a prism) lies on the table; the open jaws
 are placed around it at the executed jaw starts (after approach noise), just above the
