@@ -347,15 +347,43 @@ def _plan(args) -> int:
 def _bench(args) -> int:
     from harness import bench
 
+    if args.which == "regimes":
+        return _bench_regimes(args)
     results = bench.run(args.which, exact_max_mb=args.exact_max_mb, sizes=args.sizes, seeds=args.seeds,
                         scenes=args.scenes, candidates=args.candidates, first_seed=args.first_seed,
-                        shared_draws=args.shared_draws, prior_draws=args.prior_draws, out=args.out,
-                        workers=args.workers)
+                        shared_draws=args.shared_draws, prior_draws=args.prior_draws,
+                        out=args.out or "results/engines", workers=args.workers)
     if args.json:
         print(json.dumps(results, indent=2, default=str))
     else:
         print(bench.format_results(results))
     return 0
+
+
+def _bench_regimes(args) -> int:
+    from harness.bench import regimes_study
+    from harness.executor import check_scheduler
+
+    warning = check_scheduler(args.scheduler)  # before any folder or ledger exists
+    if warning:
+        print(f"{PROG}: warning: {warning}", file=sys.stderr)
+    result = regimes_study.run(out=Path(args.out or "results/regimes"), engines=args.engines, workers=args.workers,
+                               scheduler=args.scheduler, log=lambda line: print(line, file=sys.stderr, flush=True))
+    if args.json:
+        print(json.dumps(result, indent=2, default=regimes_study._jsonable))
+    else:
+        print("\n".join(regimes_study.format_lines(result)))
+    return 0
+
+
+def _engine_list(text: str) -> tuple[str, ...]:
+    from harness.protocol import ENGINES
+
+    names = tuple(dict.fromkeys(n.strip() for n in text.split(",") if n.strip()))
+    bad = [n for n in names if n not in ENGINES]
+    if not names or bad:
+        raise argparse.ArgumentTypeError(f"expected engines from {', '.join(ENGINES)}, comma-separated; got '{text}'")
+    return names
 
 
 _GRASP = {"nargs": 4, "type": _coordinate, "required": True, "metavar": ("X1", "Y1", "X2", "Y2"),
@@ -465,7 +493,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     bench = sub.add_parser("bench", help="benchmarks, measured as ratios in one run")
     bench.add_argument("which", nargs="?", default="all",
-                       choices=["sampling", "planning", "quality", "physics", "lift", "bandit", "engines", "all"])
+                       choices=["sampling", "planning", "quality", "physics", "lift", "bandit", "engines", "regimes",
+                                "all"])
     bench.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     bench.add_argument("--exact-max-mb", type=float, default=2500.0,
                        help="skip the dense exact sampler when its covariance exceeds this (default 2500)")
@@ -492,11 +521,17 @@ def build_parser() -> argparse.ArgumentParser:
                        help="also run Thompson sampling with each of these values of gp-bandit's "
                             "prior_draws (comma-separated; labelled thompson-prior-VALUE): a sensitivity "
                             "study of the model prior's weight")
-    bench.add_argument("--out", default="results/engines",
+    bench.add_argument("--out", default=None,
                        help="bench engines: the folder of its two runs, its frames and study.json "
-                            "(default results/engines)")
+                            "(default results/engines); bench regimes: the folder of its runs, objects, "
+                            "regimes.csv, regimes.json and regime_map.png (default results/regimes)")
     bench.add_argument("--workers", type=_positive_int, default=None,
-                       help="bench engines: worker processes of each run (default: one per core)")
+                       help="bench engines and regimes: worker processes of each run (default: one per core)")
+    bench.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                       help="bench regimes: run on a Dask cluster ('local' or tcp://host:8786), as eval does")
+    bench.add_argument("--engines", type=_engine_list, default=("pybullet",),
+                       help="bench regimes: the engines to run the sweep in, comma-separated "
+                            "(default pybullet; pybullet,mujoco runs both)")
     bench.set_defaults(func=_bench)
     return parser
 

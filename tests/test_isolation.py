@@ -128,8 +128,10 @@ def test_ctrl_c_interrupts_the_run_and_it_resumes(tmp_path):
     env = dict(os.environ, PYTHONPATH=f"{ROOT / 'tests'}{os.pathsep}{ROOT}")
     command = [sys.executable, "-m", "harness", "eval", str(config), "--out", str(out), "--no-report",
                "--memory-budget", "1", "--workers", "1"]
+    # SIGINT's default action restored in the run: a shell without job control starts
+    # background commands (`make test &`) with SIGINT ignored, which the run would inherit.
     proc = subprocess.Popen(command, cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                            start_new_session=True)
+                            start_new_session=True, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     deadline = time.monotonic() + 120
     while not _sleeping_child(proc.pid) and proc.poll() is None and time.monotonic() < deadline:
         time.sleep(0.05)

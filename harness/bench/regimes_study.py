@@ -1,0 +1,349 @@
+"""P_L and the planners across physical regimes (``gpis-harness bench regimes``).
+
+A regime is one physical setting: the gripper's force limit, the jaws' friction, the
+approach noise, and the objects' size and density. The sweep runs one experiment per
+regime (the planners of make eval, on the procedural objects of
+:mod:`harness.bench.regime_objects`), each an ordinary, resumable eval run in
+``OUT/ENGINE/REGIME`` whose scenes are files written to ``OUT/objects``, and reports per
+regime: the analytic P_F's and P_L's Spearman (over plans), Brier (over trials) and mean
+estimate against physical success; each planner's pooled success; the paired
+differences of the lift planners against mean-shape-lift.
+
+The regimes are one axis at a time around a centre (the library's gripper and friction,
+medium objects), from a weak gripper (5 N) to a strong one (40 N), slippery jaws (0.2)
+to grippy ones (0.8), precise approaches (1 mm) to noisy ones (5 mm), small light
+objects to large heavy ones; and two regimes that mix the axes at values the others do
+not use, held out. One object in four of each family is held out too. Held-out objects
+and regimes are never looked at while the lift model is changed (docs/lift.md); the
+tables report them apart ('design': design objects in design regimes; 'held_out': the
+held-out objects in every regime, and every object in the held-out regimes).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from harness.bench.regime_objects import objects as regime_objects
+
+#: Trials per plan and analytic draws. 24 objects x 24 posterior trials give 576 trials
+#: per planner and regime (a Wilson interval of about +-0.03 at 0.85); the paired
+#: differences are narrower. 500 draws put the analytic estimates' own standard error
+#: below 0.023, small against their spread across plans.
+POSTERIOR_TRIALS = 24
+TRUTH_TRIALS = 8
+ANALYTIC_DRAWS = 500
+TIME_BUDGET_S = 30.0
+#: "Success varies" in a regime when at least this share of its plans succeed on fewer
+#: than SUCCESS_VARIES_BELOW of their posterior trials (below it, every planner nearly
+#: always succeeds and a ranking of plans has little to rank).
+VARIES_SHARE = 0.1
+SUCCESS_VARIES_BELOW = 0.9
+#: The targets of P_L (issue "P_L and the planners across physical regimes").
+SPEARMAN_TARGET = 0.7
+BRIER_TARGET = 0.10
+BASELINE_LIFT = "mean-shape-lift"
+LIFT_PLANNERS = ("gp-gpis-opt-lift", "gp-p-lift")
+
+
+@dataclass(frozen=True)
+class Regime:
+    """A physical setting of the sweep."""
+
+    name: str
+    force: float       # N, each jaw's force limit (gripper.force)
+    friction: float    # jaw-object Coulomb friction
+    sigma_g: float     # m, approach noise per jaw start
+    size: float        # m, the objects' longest extent
+    density: float     # kg/m^3
+    held_out: bool = False
+
+    @property
+    def objects_key(self) -> str:
+        return f"{100 * self.size:g}cm-{self.density:g}"
+
+
+#: The centre: the library's gripper, friction and approach noise; objects of 11 cm at
+#: 1000 kg/m^3 (33-180 g; the library holds 50-450 g).
+CENTRE = Regime("centre", 20.0, 0.5, 0.0025, 0.11, 1000.0)
+REGIMES = (
+    CENTRE,
+    Regime("weak", 5.0, 0.5, 0.0025, 0.11, 1000.0),
+    Regime("strong", 40.0, 0.5, 0.0025, 0.11, 1000.0),
+    Regime("slippery", 20.0, 0.2, 0.0025, 0.11, 1000.0),
+    Regime("grippy", 20.0, 0.8, 0.0025, 0.11, 1000.0),
+    Regime("precise", 20.0, 0.5, 0.001, 0.11, 1000.0),
+    Regime("noisy", 20.0, 0.5, 0.005, 0.11, 1000.0),
+    Regime("small-light", 20.0, 0.5, 0.0025, 0.08, 400.0),     # 5-28 g
+    Regime("large-heavy", 20.0, 0.5, 0.0025, 0.15, 2000.0),    # 170-910 g
+    # Held out: the axes mixed, at values no design regime uses.
+    Regime("weak-slippery-noisy", 8.0, 0.3, 0.004, 0.11, 1000.0, held_out=True),
+    Regime("firm-heavy", 30.0, 0.65, 0.0015, 0.13, 1500.0, held_out=True),
+)
+
+
+def regime_config(regime: Regime, scenes: list[Path], engine: str = "pybullet", planners: list | None = None,
+                  posterior_trials: int = POSTERIOR_TRIALS, truth_trials: int = TRUTH_TRIALS,
+                  analytic_draws: int = ANALYTIC_DRAWS) -> dict:
+    """The experiment config (as a parsed TOML document) of one regime."""
+    doc = {"name": f"regime-{regime.name}", "seed": 0, "scenes": [str(s) for s in scenes], "realisations": 1,
+           "evaluation": {"analytic_draws": analytic_draws, "posterior_trials": posterior_trials,
+                          "truth_trials": truth_trials, "sigma_g": regime.sigma_g, "friction": regime.friction,
+                          "time_budget_s": TIME_BUDGET_S},
+           "gripper": {"force": regime.force},
+           "planners": planners if planners is not None else _default_planners()}
+    if engine != "pybullet":
+        doc["physics"] = {"engine": engine}
+    return doc
+
+
+def _default_planners() -> list:
+    """make eval's planners (experiments/default.toml)."""
+    import tomllib
+
+    with open(Path(__file__).resolve().parents[2] / "experiments" / "default.toml", "rb") as f:
+        return tomllib.load(f)["planners"]
+
+
+def write_objects(out: Path, regimes=REGIMES, objects=None) -> dict[str, list[Path]]:
+    """Write each object's scene file at each (size, density) the regimes use; returns
+    the paths per objects_key."""
+    written = {}
+    for regime in regimes:
+        if regime.objects_key in written:
+            continue
+        folder = Path(out) / "objects" / regime.objects_key
+        folder.mkdir(parents=True, exist_ok=True)
+        paths = []
+        for obj in objects or regime_objects():
+            path = folder / f"{obj.name}.toml"
+            text = obj.scene_text(regime.size, regime.density)
+            if not path.exists() or path.read_text() != text:
+                path.write_text(text)
+            paths.append(path)
+        written[regime.objects_key] = paths
+    return written
+
+
+def run(out: Path = Path("results/regimes"), engines=("pybullet",), workers: int | None = None,
+        scheduler: str | None = None, regimes=REGIMES, objects=None, planners: list | None = None,
+        posterior_trials: int = POSTERIOR_TRIALS, truth_trials: int = TRUTH_TRIALS,
+        analytic_draws: int = ANALYTIC_DRAWS, log=print) -> dict:
+    """Run (or resume) every regime's experiment in each engine, then :func:`study`.
+    ``objects``: the sweep's objects (default :func:`regime_objects.objects`)."""
+    from harness.config import parse_config
+    from harness.experiment import run_experiment
+    from harness.memory import check_config
+    from harness.outputs import command_line, folder_lock, output_folder
+    from harness.report import write_report
+
+    out = Path(out)
+    objects = objects or regime_objects()
+    scenes = write_objects(out, regimes, objects)
+    workers = workers or (None if scheduler else os.cpu_count() or 1)
+    for engine in engines:
+        for regime in regimes:
+            folder = output_folder(out / engine / regime.name)
+            doc = regime_config(regime, scenes[regime.objects_key], engine, planners, posterior_trials,
+                                truth_trials, analytic_draws)
+            config = parse_config(doc, source=f"bench regimes: {regime.name}", base_dir=out,
+                                  default_name=doc["name"])
+            plan_memory = check_config(config, workers or 1, None)
+            with folder_lock(folder, command_line()):
+                stats = run_experiment(config, folder, workers=workers, scheduler=scheduler, log=log,
+                                       plan_memory=plan_memory)
+                if stats.interrupted:
+                    raise KeyboardInterrupt
+                log(f"{engine} {regime.name}: {stats.plans} plans and {stats.trials} trials in {stats.seconds:.0f} s")
+                write_report(folder, figures=False)
+    result = study(out, engines, regimes, objects)
+    (out / "regimes.json").write_text(json.dumps(result, indent=1, default=_jsonable) + "\n")
+    rows = pd.DataFrame(result["rows"])
+    rows.to_csv(out / "regimes.csv", index=False)
+    result["figure"] = str(regime_map(rows, out / "regime_map.png"))
+    return result
+
+
+def study(out: Path, engines=("pybullet",), regimes=REGIMES, objects=None) -> dict:
+    """Per engine, regime and part (design, held_out, all): the calibration of P_F and
+    P_L, each planner's success and the lift planners' paired differences; and the
+    differences pooled over the sweep."""
+    from harness.report import load
+
+    objects = objects or regime_objects()
+    held = {o.name for o in objects if o.held_out}
+    rows, pooled = [], {}
+    for engine in engines:
+        runs = {}
+        for regime in regimes:
+            data = load(Path(out) / engine / regime.name)
+            runs[regime.name] = data
+            names = sorted(data["plans"].scene.unique())
+            parts = {"all": names}
+            if regime.held_out:
+                parts["held_out"] = names
+            else:
+                parts["design"] = [n for n in names if n not in held]
+                parts["held_out"] = [n for n in names if n in held]
+            for part, scenes in parts.items():
+                if not scenes:
+                    continue
+                rows.append({"engine": engine, "regime": regime.name, "part": part,
+                             "regime_held_out": regime.held_out, **_regime_row(data, scenes),
+                             **{k: v for k, v in asdict(regime).items() if k not in ("name", "held_out")}})
+        pooled[engine] = _pooled(runs, regimes, held)
+    return {"rows": rows, "pooled": pooled, "regimes": [asdict(r) for r in regimes],
+            "objects": {"design": sorted(o.name for o in objects if not o.held_out), "held_out": sorted(held)},
+            "targets": {"spearman": SPEARMAN_TARGET, "brier": BRIER_TARGET, "varies_share": VARIES_SHARE,
+                        "success_varies_below": SUCCESS_VARIES_BELOW}}
+
+
+def _part(data: dict, scenes: list[str]) -> dict:
+    """The run ``data`` restricted to ``scenes``."""
+    keep = set(scenes)
+    return {**data, **{t: data[t][data[t].scene.isin(keep)] for t in ("plans", "analytic", "trials")}}
+
+
+def _regime_row(data: dict, scenes: list[str]) -> dict:
+    from harness.report import ALL, calibration
+
+    part = _part(data, scenes)
+    row = {"objects": len(scenes)}
+    post = part["trials"][part["trials"].shapes == "posterior"]
+    per_plan = post.assign(s=post.outcome == "success").groupby(["scene", "realisation", "planner"]).s.mean()
+    row["plans"] = len(per_plan)
+    row["share_below_0_9"] = float((per_plan < SUCCESS_VARIES_BELOW).mean()) if len(per_plan) else math.nan
+    row["varies"] = bool(row["share_below_0_9"] >= VARIES_SHARE)
+    cal = calibration(part)[0]
+    for r in cal[cal.planner == ALL].itertuples():
+        row.update({f"{r.metric}_spearman": r.spearman, f"{r.metric}_brier": r.brier,
+                    f"{r.metric}_mean": r.mean_estimate})
+    row["success_rate"] = float((post.outcome == "success").mean()) if len(post) else math.nan
+    won = part["trials"].assign(s=part["trials"].outcome == "success")
+    rates = won.groupby(["shapes", "planner"], sort=False).s.mean()
+    for planner in dict.fromkeys(won.planner):
+        row[f"success:{planner}"] = float(rates.get(("posterior", planner), math.nan))
+        row[f"truth:{planner}"] = float(rates.get(("truth", planner), math.nan))
+    for planner in LIFT_PLANNERS:
+        d = _difference(part["trials"], planner, BASELINE_LIFT)
+        row.update({f"diff:{planner}": d["difference"], f"diff_low:{planner}": d["ci_low"],
+                    f"diff_high:{planner}": d["ci_high"]})
+    row["p_l_holds"] = bool(row.get("p_l_spearman", math.nan) >= SPEARMAN_TARGET
+                            and row.get("p_l_brier", math.nan) <= BRIER_TARGET)
+    return row
+
+
+def _difference(trials: pd.DataFrame, a: str, b: str, seed: int = 0) -> dict:
+    """Paired success difference a - b on posterior samples with the report's bootstrap
+    interval (pairs resampled within each plan's trials); ``trials`` may hold several
+    regimes (a 'regime' column keeps their plans apart)."""
+    from harness.report import _paired, paired_difference, row_groups
+
+    if "regime" in trials.columns:
+        trials = trials.assign(scene=trials.regime + "/" + trials.scene)
+    m = _paired(trials, a, b, "posterior")
+    if m.empty:
+        return {"pairs": 0, "difference": math.nan, "ci_low": math.nan, "ci_high": math.nan}
+    rng = np.random.default_rng(np.random.SeedSequence([seed, 0x5EE9]))
+    return paired_difference((m.a - m.b).to_numpy(), row_groups(m, ["scene", "realisation"]), rng)
+
+
+def _pooled(runs: dict, regimes, held: set) -> dict:
+    """The lift planners' paired differences over every regime (posterior samples), on
+    the design part and on the held-out part."""
+    frames = {"design": [], "held_out": [], "all": []}
+    for regime in regimes:
+        t = runs[regime.name]["trials"].assign(regime=regime.name)
+        frames["all"].append(t)
+        out_mask = t.scene.isin(held) | regime.held_out
+        frames["held_out"].append(t[out_mask])
+        frames["design"].append(t[~out_mask])
+    return {part: {planner: _difference(pd.concat(f, ignore_index=True), planner, BASELINE_LIFT)
+                   for planner in LIFT_PLANNERS} for part, f in frames.items()}
+
+
+def regime_map(rows: pd.DataFrame, path: Path) -> Path:
+    """The regime map: per regime (rows), P_L's Spearman and Brier against their targets
+    and the lift planners' paired differences against mean-shape-lift, for the design
+    and held-out parts of each engine."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    engines = list(dict.fromkeys(rows.engine))
+    regimes = list(dict.fromkeys(rows.regime))
+    fig, axes = plt.subplots(len(engines), 3, figsize=(13, 0.45 * len(regimes) * len(engines) + 1.6),
+                             squeeze=False, sharey=True)
+    y = np.arange(len(regimes))
+    for e, engine in enumerate(engines):
+        for part, dy, colour in (("design", -0.18, "tab:blue"), ("held_out", 0.18, "tab:orange")):
+            g = rows[(rows.engine == engine) & (rows.part == part)].set_index("regime").reindex(regimes)
+            faded = np.where(g.varies.fillna(False).astype(bool), 1.0, 0.35)
+            for ax, col, target in ((axes[e, 0], "p_l_spearman", SPEARMAN_TARGET),
+                                    (axes[e, 1], "p_l_brier", BRIER_TARGET)):
+                ax.barh(y + dy, g[col], height=0.34, color=colour, alpha=0.8, label=part.replace("_", " "))
+                for k, a in enumerate(faded):
+                    if a < 1:
+                        ax.barh(y[k] + dy, g[col].iloc[k], height=0.34, color="white", alpha=0.6)
+                ax.axvline(target, color="k", lw=1, ls="--")
+            for planner, marker in zip(LIFT_PLANNERS, ("o", "s")):
+                d = g[f"diff:{planner}"]
+                err = np.vstack([d - g[f"diff_low:{planner}"], g[f"diff_high:{planner}"] - d])
+                axes[e, 2].errorbar(d, y + dy + (0.06 if marker == "s" else -0.06), xerr=err, fmt=marker,
+                                    color=colour, ms=4, lw=1,
+                                    label=f"{planner} ({part.replace('_', ' ')})")
+        axes[e, 2].axvline(0, color="k", lw=1)
+        axes[e, 0].set_title(f"{engine}: P_L Spearman (target >= {SPEARMAN_TARGET})", fontsize=9)
+        axes[e, 1].set_title(f"{engine}: P_L Brier (target <= {BRIER_TARGET})", fontsize=9)
+        axes[e, 2].set_title(f"{engine}: success - {BASELINE_LIFT} (paired, 95 %)", fontsize=9)
+    axes[0, 0].set_yticks(y, [r + (" *" if rows[rows.regime == r].regime_held_out.any() else "") for r in regimes],
+                          fontsize=8)
+    axes[0, 0].invert_yaxis()
+    axes[0, 0].legend(fontsize=7, loc="lower left")
+    axes[0, 2].legend(fontsize=6, loc="lower left")
+    fig.text(0.01, 0.005, "* held-out regime; faded bars: success does not vary (fewer than a tenth of the "
+             "plans below 0.9)", fontsize=7)
+    fig.tight_layout(rect=(0, 0.02, 1, 1))
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def _jsonable(value):
+    if isinstance(value, (np.floating, np.integer, np.bool_)):
+        return value.item()
+    return str(value)
+
+
+def format_lines(res: dict) -> list[str]:
+    """The per-regime table (P_L and the lift planners' differences) as text."""
+    lines = []
+    for engine in dict.fromkeys(r["engine"] for r in res["rows"]):
+        lines.append(f"{engine}: regime, part, plans, share of plans below 0.9, P_F Spearman/Brier, "
+                     f"P_L Spearman/Brier/mean, success, gp-gpis-opt-lift and gp-p-lift - {BASELINE_LIFT}")
+        lines.append(f"{'regime':<22}{'part':<10}{'plans':>6}{'<0.9':>6}{'P_F rho':>9}{'Brier':>7}"
+                     f"{'P_L rho':>9}{'Brier':>7}{'mean':>6}{'succ':>6}  {'opt-lift diff [95%]':<24}"
+                     f"{'gp-p-lift diff [95%]':<24}")
+        for r in res["rows"]:
+            if r["engine"] != engine:
+                continue
+            diffs = "".join(f"{r[f'diff:{p}']:+.3f} [{r[f'diff_low:{p}']:+.3f},{r[f'diff_high:{p}']:+.3f}]  "
+                            for p in LIFT_PLANNERS)
+            name = r["regime"] + ("*" if r["regime_held_out"] else "")
+            lines.append(f"{name:<22}{r['part']:<10}{r['plans']:>6}{r['share_below_0_9']:>6.2f}"
+                         f"{r.get('p_f_spearman', math.nan):>9.2f}{r.get('p_f_brier', math.nan):>7.3f}"
+                         f"{r.get('p_l_spearman', math.nan):>9.2f}{r.get('p_l_brier', math.nan):>7.3f}"
+                         f"{r.get('p_l_mean', math.nan):>6.2f}{r['success_rate']:>6.2f}  {diffs}")
+        for part, d in res["pooled"][engine].items():
+            lines.append(f"pooled over the sweep ({part}): " + "; ".join(
+                f"{p} {v['difference']:+.3f} [{v['ci_low']:+.3f}, {v['ci_high']:+.3f}]" for p, v in d.items()))
+    if "figure" in res:
+        lines.append(f"regime map: {res['figure']}")
+    return lines

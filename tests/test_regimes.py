@@ -1,0 +1,132 @@
+"""The regime sweep (harness.bench.regimes_study, `gpis-harness bench regimes`): its
+objects are valid scenes of the size asked for, and its per-regime statistics agree with
+the same numbers computed directly from the trials of a small sweep."""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pandas as pd
+import pytest
+from scipy import stats
+
+from harness.bench import regimes_study as rs
+from harness.bench.regime_objects import FAMILIES, objects
+from harness.report import load
+from harness.scene import load_scene
+
+PLANNERS = [{"name": "mean-shape", "label": "mean-shape-lift", "params": {"quality": "lift", "candidates": 20}},
+            {"name": "gp-gpis-opt", "label": "gp-gpis-opt-lift",
+             "params": {"quality": "lift", "initialisations": 2, "screen": 10, "max_iterations": 5}},
+            {"name": "gp-p", "label": "gp-p-lift", "params": {"quality": "lift", "candidates": 10, "samples": 30}}]
+REGIMES = (rs.CENTRE, rs.REGIMES[1], rs.REGIMES[-2])  # centre, weak and a held-out regime
+OBJECTS = objects(per_family=2, held_out_every=2, families=("tool", "letter"))
+
+
+def test_objects_are_scenes_of_their_size(tmp_path):
+    """Every object of the default sweep is a valid scene at each size the regimes use;
+    its longest extent (the hull's diameter) is 0.7-1.25 times the size; the same object is written the same
+    way twice; one in four is held out, in every family."""
+    everything = objects()
+    assert len(everything) == 24 and {o.family for o in everything} == set(FAMILIES)
+    assert sum(o.held_out for o in everything) == 6
+    assert [o.name for o in everything if o.held_out] == [f"{f}_3" for f in FAMILIES]
+    for size, density in {(r.size, r.density) for r in rs.REGIMES}:
+        for obj in everything:
+            path = tmp_path / f"{obj.name}.toml"
+            path.write_text(obj.scene_text(size, density))
+            scene = load_scene(path)
+            hull = np.asarray(scene.shape.convex_hull.exterior.coords)
+            longest = np.linalg.norm(hull[:, None] - hull[None], axis=-1).max()
+            assert 0.7 * size <= longest <= 1.25 * size, (obj.name, size, longest)
+            assert scene.physics.density == density and scene.physics.thickness == pytest.approx(0.3 * size)
+    again = objects()
+    assert [o.scene_text(0.11, 1000.0) for o in again] == [o.scene_text(0.11, 1000.0) for o in everything]
+
+
+@pytest.fixture(scope="module")
+def sweep(tmp_path_factory):
+    out = tmp_path_factory.mktemp("regimes")
+    result = rs.run(out, workers=2, regimes=REGIMES, objects=OBJECTS, planners=PLANNERS, posterior_trials=6,
+                    truth_trials=2, analytic_draws=60, log=lambda line: None)
+    return out, result
+
+
+def _direct(out, regime: str, scenes) -> dict:
+    """The statistics of one regime's part, computed here from the ledger's rows."""
+    data = load(out / "pybullet" / regime)
+    plans = data["plans"][data["plans"].scene.isin(scenes) & (data["plans"].executed == 1)]
+    trials = data["trials"][data["trials"].scene.isin(scenes)]
+    post = trials[trials.shapes == "posterior"].assign(s=lambda t: (t.outcome == "success").astype(float))
+    rate = post.groupby(["scene", "planner"]).s.mean()
+    est = plans.merge(data["analytic"], on=["scene", "realisation", "planner"]).set_index(["scene", "planner"]).p_l
+    est, rate_ = est.align(rate, join="inner")
+    brier = float(((est.reindex(pd.MultiIndex.from_frame(post[["scene", "planner"]])).to_numpy()
+                    - post.s.to_numpy()) ** 2).mean())
+    wide = post.pivot_table(index=["scene", "trial"], columns="planner", values="s")
+    varied = est.nunique() > 1 and rate_.nunique() > 1
+    return {"p_l_spearman": stats.spearmanr(est, rate_).statistic if varied else math.nan, "p_l_brier": brier,
+            "diff": {p: float((wide[p] - wide["mean-shape-lift"]).mean()) for p in rs.LIFT_PLANNERS},
+            "share": float((rate < 0.9).mean()), "success": float(post.s.mean())}
+
+
+def test_regime_rows_match_the_trials(sweep):
+    """Spearman, Brier, the share of plans below 0.9, success and the paired differences
+    of every row equal the same statistics computed directly from the trials (to 1e-9);
+    each part holds the objects it should; each interval holds its difference."""
+    out, result = sweep
+    rows = pd.DataFrame(result["rows"])
+    assert set(rows.regime) == {r.name for r in REGIMES}
+    held = {o.name for o in OBJECTS if o.held_out}
+    spearmans = 0
+    for r in result["rows"]:
+        regime = next(g for g in REGIMES if g.name == r["regime"])
+        names = {o.name for o in OBJECTS}
+        scenes = {"all": names, "design": names - held,
+                  "held_out": names if regime.held_out else held}[r["part"]]
+        assert r["objects"] == len(scenes)
+        direct = _direct(out, r["regime"], scenes)
+        if not math.isnan(direct["p_l_spearman"]):
+            spearmans += 1
+            assert r["p_l_spearman"] == pytest.approx(direct["p_l_spearman"], abs=1e-9)
+        assert r["p_l_brier"] == pytest.approx(direct["p_l_brier"], abs=1e-9)
+        assert r["share_below_0_9"] == pytest.approx(direct["share"], abs=1e-12)
+        assert r["success_rate"] == pytest.approx(direct["success"], abs=1e-12)
+        assert r["varies"] == (direct["share"] >= rs.VARIES_SHARE)
+        for p in rs.LIFT_PLANNERS:
+            assert r[f"diff:{p}"] == pytest.approx(direct["diff"][p], abs=1e-12)
+            assert r[f"diff_low:{p}"] <= r[f"diff:{p}"] + 1e-12 <= r[f"diff_high:{p}"] + 2e-12
+    assert spearmans >= 3  # the comparison ran on rows where success varies
+    assert not {"design"} & set(rows[rows.regime_held_out].part)
+
+
+def test_pooled_difference_is_the_trial_weighted_mean(sweep):
+    """The difference pooled over the sweep is the mean over every paired trial, which is
+    the per-regime differences weighted by their pairs (a second formulation)."""
+    out, result = sweep
+    rows = pd.DataFrame(result["rows"])
+    allrows = rows[rows.part == "all"]
+    for p in rs.LIFT_PLANNERS:
+        pairs = np.array([len(OBJECTS) * 6] * len(allrows))  # every plan executed: objects x posterior trials
+        weighted = float((allrows[f"diff:{p}"].to_numpy() * pairs).sum() / pairs.sum())
+        pooled = result["pooled"]["pybullet"]["all"][p]
+        assert pooled["pairs"] == pairs.sum()
+        assert pooled["difference"] == pytest.approx(weighted, abs=1e-12)
+        assert pooled["ci_low"] <= pooled["difference"] <= pooled["ci_high"]
+
+
+def test_outputs_and_the_command_line(sweep, tmp_path):
+    """regimes.csv and the regime map are written; a second run resumes (no new trial)
+    and gives the same rows; a bad --engines is one line and exit code 2."""
+    out, result = sweep
+    assert (out / "regimes.csv").is_file() and (out / "regime_map.png").stat().st_size > 10_000
+    again = rs.run(out, workers=1, regimes=REGIMES, objects=OBJECTS, planners=PLANNERS, posterior_trials=6,
+                   truth_trials=2, analytic_draws=60, log=lambda line: None)
+    pd.testing.assert_frame_equal(pd.DataFrame(again["rows"]), pd.DataFrame(result["rows"]))
+    assert "pooled over the sweep (design)" in "\n".join(rs.format_lines(result))
+    bad = subprocess.run([sys.executable, "-m", "harness", "bench", "regimes", "--engines", "bullet",
+                          "--out", str(tmp_path / "x")], capture_output=True, text=True)
+    assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1 and "--engines" in bad.stderr
