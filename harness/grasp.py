@@ -165,17 +165,24 @@ class SDFBatch:
 @dataclass(frozen=True)
 class Regions:
     """The largest connected region inside the zero level of each of F fields, the body a
-    physics trial extrudes. Cells count with the fraction of their area inside,
-    clip(1/2 - f / h, 0, 1) (exact for a boundary parallel to a cell side), and connect
-    through their sides. area (F,) in m^2 (0 without an inside); center_of_mass (F, 2)
-    (NaN without an inside); hull (F, V, 2): vertices of the convex hull of the centres
-    of the region's cells (its extreme cells in V = HULL_DIRECTIONS directions), so that
-    the region's extent in any direction is a maximum over V points (to within half a
-    cell)."""
+    physics trial extrudes (its *body*). The inside is where the fields' bilinear
+    interpolant is negative, as the physics' outline (marching squares,
+    harness.geometry.inside_region, then its largest part): nodes below zero connect
+    through the sides of their cells, and across a cell's diagonal where the cell's
+    centre (the mean of its corners) is below zero too, as marching squares decides a
+    saddle. A region's cells count with the fraction of their area inside,
+    clip(1/2 - f / h, 0, 1) (exact for a boundary parallel to a cell side); a cell
+    partly inside (0 <= f < h/2) belongs to the region of an inside neighbour. area (F,)
+    in m^2 (0 without an inside); center_of_mass (F, 2) (NaN without an inside); hull
+    (F, V, 2): vertices of the convex hull of the centres of the region's cells (its
+    extreme cells in V = HULL_DIRECTIONS directions), so that the region's extent in any
+    direction is a maximum over V points (to within half a cell); fragmented (F,): the
+    field has inside nodes outside its body (pieces the physics does not extrude)."""
 
     area: np.ndarray
     center_of_mass: np.ndarray
     hull: np.ndarray
+    fragmented: np.ndarray
 
     def extent(self, field_index: np.ndarray, origin: np.ndarray, direction: np.ndarray) -> np.ndarray:
         """How far (B,) region ``field_index[b]`` reaches from ``origin[b]`` along the unit
@@ -548,15 +555,15 @@ def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
                             u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]])
 
 
-def _largest_regions(values: np.ndarray, grid: Grid) -> Regions:
+def _largest_regions(values: np.ndarray, grid: Grid, return_masks: bool = False) -> Regions:
     f, h = len(values), grid.cell
     frac = np.clip(0.5 - values / h, 0.0, 1.0)
-    structure = np.zeros((3, 3, 3), dtype=bool)
-    structure[1] = [[0, 1, 0], [1, 1, 1], [0, 1, 0]]  # connect within a field only
-    labels, count = ndimage.label(frac > 0, structure=structure)
+    labels, count = body_labels(values, h)
     com = np.full((f, 2), np.nan)
     if count == 0:
-        return Regions(np.zeros(f), com, np.full((f, 1, 2), -np.inf))
+        if return_masks:
+            return labels, np.zeros(values.shape, dtype=bool)
+        return Regions(np.zeros(f), com, np.full((f, 1, 2), -np.inf), np.zeros(f, dtype=bool))
     area = ndimage.sum_labels(frac, labels, index=np.arange(1, count + 1))
     # Labels run in scan order, so each field's regions hold a contiguous run of labels
     # (first..last); a field without any region has last < first.
@@ -569,14 +576,86 @@ def _largest_regions(values: np.ndarray, grid: Grid) -> Regions:
     candidates = np.where(area == largest, np.arange(1, count + 1), count + 1)
     best = np.zeros(f, dtype=np.int64)
     best[fields] = np.minimum.reduceat(candidates, starts)
+    fragmented = np.zeros(f, dtype=bool)
+    fragmented[fields] = lengths > 1
     mine = labels == best[:, None, None]
+    if return_masks:
+        return labels, mine
     w = np.where(mine, frac, 0.0)
     total = w.sum(axis=(1, 2))
     with np.errstate(invalid="ignore", divide="ignore"):
         com[:, 0] = w.sum(axis=1) @ grid.coords / total
         com[:, 1] = w.sum(axis=2) @ grid.coords / total
     com[total == 0] = np.nan
-    return Regions(total * h * h, com, _hulls(mine, grid))
+    return Regions(total * h * h, com, _hulls(mine, grid), fragmented)
+
+
+def body_fields(fields: SDFBatch, ids: np.ndarray) -> SDFBatch:
+    """Fields ``ids`` of ``fields`` with only their body (:class:`Regions`) left inside:
+    the other pieces' nodes, and the nodes partly inside next to them only, are set at
+    least one cell outside with a flat gradient, so that no jaw meets them (the physics
+    extrudes the body alone) and the interpolant stays outside between them and their
+    outside neighbours. The regions are the originals' (the same bodies)."""
+    ids = np.asarray(ids, dtype=np.int64)
+    h = fields.grid.cell
+    values, gx, gy = fields.values[ids].copy(), fields.gx[ids].copy(), fields.gy[ids].copy()
+    twist = fields.twist[ids].copy()
+    labels, mine = _largest_regions(values.astype(float), fields.grid, return_masks=True)
+    side = np.zeros((3, 3, 3), dtype=bool)
+    side[1] = [[0, 1, 0], [1, 1, 1], [0, 1, 0]]
+    near_body = ndimage.binary_dilation(mine & (values < 0), structure=side)
+    other = (labels > 0) & ~mine & ~near_body
+    values[other] = np.maximum(values[other], h)
+    gx[other], gy[other], twist[other] = 0.0, 0.0, 0.0
+    r = fields.regions
+    regions = Regions(r.area[ids], r.center_of_mass[ids], r.hull[ids], np.zeros(len(ids), dtype=bool))
+    return SDFBatch.of_parts(fields.grid, values, gx, gy, twist, regions)
+
+
+def body_labels(values: np.ndarray, cell: float) -> tuple[np.ndarray, int]:
+    """Connected regions inside the zero level of each field of ``values`` (F, M, M), as
+    marching squares draws them (see :class:`Regions`): labels (F, M, M) (0 outside;
+    each field's labels a contiguous run, in scan order) and their number. A node partly
+    inside (0 <= f < cell / 2) next to an inside node takes that node's label."""
+    inside = values < 0
+    side = np.zeros((3, 3, 3), dtype=bool)
+    side[1] = [[0, 1, 0], [1, 1, 1], [0, 1, 0]]  # connect within a field only
+    labels, count = ndimage.label(inside, structure=side)
+    if count == 0:
+        return labels, 0
+    # Saddles: a cell whose diagonal corners are inside and the others not is crossed
+    # along that diagonal when its centre is inside.
+    centre = values[:, :-1, :-1] + values[:, 1:, 1:] + values[:, :-1, 1:] + values[:, 1:, :-1] < 0
+    a, b, c, d = inside[:, :-1, :-1], inside[:, 1:, 1:], inside[:, :-1, 1:], inside[:, 1:, :-1]
+    pairs = []
+    main = centre & a & b & ~c & ~d
+    anti = centre & c & d & ~a & ~b
+    if main.any():
+        pairs.append((labels[:, :-1, :-1][main], labels[:, 1:, 1:][main]))
+    if anti.any():
+        pairs.append((labels[:, :-1, 1:][anti], labels[:, 1:, :-1][anti]))
+    if pairs:
+        from scipy.sparse import coo_matrix
+        from scipy.sparse.csgraph import connected_components
+
+        u = np.concatenate([p[0] for p in pairs]) - 1
+        v = np.concatenate([p[1] for p in pairs]) - 1
+        graph = coo_matrix((np.ones(len(u)), (u, v)), shape=(count, count))
+        _, merged = connected_components(graph, directed=False)
+        # Renumber the merged labels in order of their first label, so that each field's
+        # labels stay a contiguous run in scan order.
+        order = np.full(merged.max() + 1, -1)
+        seen = 0
+        for lab in range(count):
+            if order[merged[lab]] < 0:
+                order[merged[lab]] = seen
+                seen += 1
+        table = np.concatenate([[0], order[merged] + 1])
+        labels, count = table[labels], seen
+    # Nodes outside but next to an inside node: the region of that neighbour.
+    grown = ndimage.grey_dilation(labels, footprint=side)
+    labels = np.where(inside, labels, np.where(values < 0.5 * cell, grown, 0))
+    return labels, count
 
 
 def _hulls(mine: np.ndarray, grid: Grid) -> np.ndarray:

@@ -4,6 +4,7 @@ plates' pressure, their Wilson intervals, and failure counts by reason."""
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass
 from functools import cached_property
@@ -11,8 +12,8 @@ from functools import cached_property
 import numpy as np
 
 from harness.belief import Belief
-from harness.grasp import (DEGENERATE, HULL_DIRECTIONS, MISSED, OK, TOO_WIDE, Grasp, Regions, SDFBatch, find_contacts,
-                           plate_closure)
+from harness.grasp import (DEGENERATE, HULL_DIRECTIONS, MISSED, OK, TOO_WIDE, Contacts, Grasp, Regions, SDFBatch,
+                           body_fields, find_contacts, plate_closure)
 from harness.lift import LIFT_REASONS, judge, side_normal
 from harness.settings import GraspSettings
 from harness.squeeze import squeeze
@@ -117,6 +118,7 @@ class DrawPool:
         self._area = np.zeros(n)
         self._com = np.full((n, 2), np.nan)
         self._hull = np.full((n, HULL_DIRECTIONS, 2), -np.inf)
+        self._fragmented = np.zeros(n, dtype=bool)
         self._draws: EvaluationDraws | None = None
 
     def __len__(self) -> int:
@@ -133,12 +135,13 @@ class DrawPool:
             part = SDFBatch(grid, shapes.values, shapes.gradients)
             s = slice(self.drawn, self.drawn + k)
             self._fields[:, s] = part.values, part.gx, part.gy, part.twist
-            self._area[s], self._com[s], self._hull[s] = part.regions.area, part.regions.center_of_mass, \
-                part.regions.hull
+            regions = part.regions
+            self._area[s], self._com[s], self._hull[s] = regions.area, regions.center_of_mass, regions.hull
+            self._fragmented[s] = regions.fragmented
             self.drawn += k
             d = self.drawn
             shapes = SDFBatch.of_parts(grid, *self._fields[:, :d], Regions(self._area[:d], self._com[:d],
-                                                                            self._hull[:d]))
+                                                                            self._hull[:d], self._fragmented[:d]))
             self._draws = EvaluationDraws(shapes, self.approach[:d], self.friction[:d], self.pressure[:d],
                                           self.belief.characteristic_length)
         self.seconds += time.perf_counter() - start
@@ -149,7 +152,8 @@ class DrawPool:
 class QualityEstimate:
     """P_F and P_L of one grasp: the estimates and their Wilson 95 % intervals, the number
     of draws, failures by reason (all of them the draws P_L loses; P_F loses the planar
-    reasons' draws and the squeezed ones), the draws whose weight turned the object about
+    reasons' draws and the squeezed ones, except where a sample's small pieces hold a
+    draw for P_F that misses the body for P_L), the draws whose weight turned the object about
     the grasp axis (lifted or not), the mean Ferrari-Canny quality (0 for a failed draw),
     and the draws out of force closure that the plates' squeeze brought into it (so P_L
     may exceed P_F; harness.squeeze)."""
@@ -223,8 +227,12 @@ def evaluate_draws(grasps, draws: EvaluationDraws, settings: GraspSettings, lift
     force closure, when the weight slides the object out (weight_slip) or turns it back
     onto the table (weight_torque) (harness.lift, with the shape sample's area and centre
     of mass and draw i's pressure deviates, at the contacts where the squeeze stopped).
-    ``closure`` stays the paper's force closure at the first contacts (P_F).
-    ``lift=False`` skips the lift (P_F alone; P_L is then NaN).
+    With the lift, the reasons are judged on the shape sample's body, the largest region
+    the physics extrudes: on a sample in several pieces the jaws pass where the other
+    pieces would be (harness.grasp.body_fields), so a draw P_F holds on a small piece is
+    'missed' for P_L, as the physics finds no contact there. ``closure`` stays the
+    paper's force closure at the first contacts on the whole sample (P_F).
+    ``lift=False`` skips the lift (P_F alone; P_L is then NaN; the reasons are P_F's).
     """
     starts = as_starts(grasps)
     g, n = len(starts), len(draws)
@@ -254,23 +262,26 @@ def _judge(g1, g2, field, draws: EvaluationDraws, settings: GraspSettings, lift:
     b = len(field)
     gamma = settings.frictions(draws.friction[field])
     contacts = find_contacts(draws.shapes, g1, g2, settings.jaw_width, field_index=field)
-    ok = contacts.status == OK
     closure, quality = plate_closure(contacts, gamma, draws.shapes.center_of_mass[field], draws.torque_scale)
     held = closure
-    reason = np.full(b, -1, dtype=np.int8)
-    reason[~ok & (contacts.status == TOO_WIDE)] = FAILURE_REASONS.index("too_wide")
-    reason[~ok & (contacts.status == MISSED)] = FAILURE_REASONS.index("missed")
-    reason[~ok & (contacts.status == DEGENERATE)] = FAILURE_REASONS.index("degenerate_normal")
-    reason[ok & ~closure] = FAILURE_REASONS.index("friction_cone")
     lifted = np.zeros(b, dtype=bool)
     pivots = np.zeros(b, dtype=bool)
     squeezed = np.zeros(b, dtype=bool)
     chance = np.zeros(b)
+    judged, in_closure = contacts, closure
     if lift:
-        settled = squeeze(draws.shapes, g1, g2, field, contacts, closure, gamma, settings.jaw_width,
-                          draws.torque_scale)
+        # The lift is judged on the body the physics extrudes (the largest region): on a
+        # draw with other pieces, the jaws pass where those pieces would be.
+        judged, in_closure, settled = _on_bodies(g1, g2, field, draws, contacts, closure, gamma, settings)
         squeezed = settled.squeezed
-        held = closure | squeezed
+        held = in_closure | squeezed
+    ok = judged.status == OK
+    reason = np.full(b, -1, dtype=np.int8)
+    reason[~ok & (judged.status == TOO_WIDE)] = FAILURE_REASONS.index("too_wide")
+    reason[~ok & (judged.status == MISSED)] = FAILURE_REASONS.index("missed")
+    reason[~ok & (judged.status == DEGENERATE)] = FAILURE_REASONS.index("degenerate_normal")
+    reason[ok & ~in_closure] = FAILURE_REASONS.index("friction_cone")
+    if lift:
         reason[squeezed] = -1
     if lift and held.any():
         regions = draws.shapes.regions
@@ -284,6 +295,45 @@ def _judge(g1, g2, field, draws: EvaluationDraws, settings: GraspSettings, lift:
     return DrawOutcomes(closure.reshape(shape), lifted.reshape(shape) if lift else None, reason.reshape(shape),
                         pivots.reshape(shape), quality.reshape(shape), chance.reshape(shape) if lift else None,
                         squeezed.reshape(shape))
+
+
+def _on_bodies(g1, g2, field, draws: EvaluationDraws, contacts: Contacts, closure, gamma, settings: GraspSettings):
+    """The contacts, force closure and squeeze of the lift: the first contacts and their
+    closure (P_F's), except on draws whose shape has pieces besides its body, where the
+    jaws are marched again on the body alone (harness.grasp.body_fields); then the
+    squeeze on the same fields."""
+    jaw, scale = settings.jaw_width, draws.torque_scale
+    split = np.flatnonzero(draws.shapes.regions.fragmented[field])
+    if not len(split):
+        return contacts, closure, squeeze(draws.shapes, g1, g2, field, contacts, closure, gamma, jaw, scale)
+    ids, local = np.unique(field[split], return_inverse=True)
+    bodies = body_fields(draws.shapes, ids)
+    on_body = find_contacts(bodies, g1[split], g2[split], jaw, field_index=local)
+    body_closure, _ = plate_closure(on_body, gamma[split], bodies.center_of_mass[local], scale, with_quality=False)
+    contacts = _replace_rows(contacts, split, on_body)
+    closure = closure.copy()
+    closure[split] = body_closure
+    on_split = np.zeros(len(field), dtype=bool)
+    on_split[split] = True  # squeezed below, on the bodies
+    settled = squeeze(draws.shapes, g1, g2, field, contacts, closure | on_split, gamma, jaw, scale)
+    on_bodies = squeeze(bodies, g1[split], g2[split], local, _take_rows(contacts, split), body_closure,
+                        gamma[split], jaw, scale)
+    return contacts, closure, _replace_rows(settled, split, on_bodies)
+
+
+def _take_rows(record, rows):
+    """A dataclass of per-row arrays restricted to ``rows``."""
+    return type(record)(*(getattr(record, f.name)[rows] for f in dataclasses.fields(record)))
+
+
+def _replace_rows(record, rows, part):
+    """A copy of a dataclass of per-row arrays with ``rows`` taken from ``part``."""
+    out = {}
+    for f in dataclasses.fields(record):
+        column = getattr(record, f.name).copy()
+        column[rows] = getattr(part, f.name)
+        out[f.name] = column
+    return type(record)(**out)
 
 
 def estimate_p_f(grasps, draws: EvaluationDraws, settings: GraspSettings, lift: bool = True) -> list[QualityEstimate]:

@@ -370,3 +370,84 @@ def test_plates_flat_on_a_face_are_in_force_closure_where_their_leading_edges_ar
     closure, quality = plate_closure(c, 0.3, np.zeros(2), 0.03)
     assert closure[0] == force_closure(c.c1, c.c2, c.n1, c.n2, 0.3)[0]
     assert quality[0] == pytest.approx(ferrari_canny(c.c1, c.c2, c.n1, c.n2, 0.3, np.zeros(2), 0.03)[0])
+
+
+# -- the body: the largest region, as the physics extrudes it ---------------------------------
+
+
+def _smooth_fields(grid, n, seed, scale=0.35):
+    """Smooth random fields with thin necks and small islands: a disk's SDF plus a
+    smoothed random perturbation."""
+    from scipy import ndimage as ndi
+
+    rng = np.random.default_rng(seed)
+    base = disk_field(grid, 0.05)[0]
+    noise = np.stack([ndi.gaussian_filter(rng.standard_normal((grid.size, grid.size)), 2.5) for _ in range(n)])
+    noise /= noise.std(axis=(1, 2), keepdims=True)
+    return base[None] + scale * 0.05 * noise
+
+
+def test_bodies_are_the_largest_parts_marching_squares_draws():
+    """On 200 random fields with necks, saddles and islands, the body's inside nodes are
+    exactly the inside nodes of the largest polygon of harness.geometry.inside_region
+    (the outline the physics extrudes), a field is fragmented exactly when that region
+    has several parts, and the body's fractional area is within 3 % of the polygon's."""
+    from shapely.geometry import MultiPoint
+
+    from harness.geometry import inside_region, largest_region, polygons
+
+    grid = Grid(40, 0.2)
+    values = _smooth_fields(grid, 200, seed=11)
+    regions = SDFBatch(grid, values, np.zeros(values.shape + (2,))).regions
+    from harness.grasp import _largest_regions
+
+    labels, mine = _largest_regions(values, grid, return_masks=True)
+    xx, yy = np.meshgrid(grid.coords, grid.coords)
+    several = 0
+    for k, field in enumerate(values):
+        region = inside_region(field, grid)
+        parts = polygons(region)
+        several += len(parts) > 1
+        assert regions.fragmented[k] == (len(parts) > 1), k
+        body = largest_region(region)
+        inside = field < 0
+        points = MultiPoint(np.column_stack([xx[inside], yy[inside]]))
+        in_body = np.array([body.buffer(1e-9).contains(p) for p in points.geoms])
+        np.testing.assert_array_equal(in_body, mine[k][inside], err_msg=f"field {k}")
+        assert regions.area[k] == pytest.approx(body.area, rel=0.03), k
+    assert several >= 20  # the test saw fragmented fields
+
+
+def test_the_lift_is_judged_on_the_body_alone():
+    """A 3 cm disk (the body) and a 1 cm island 4 cm away. A grasp across the island
+    alone: in force closure on the field (P_F 1) but the jaws miss the body (P_L 0,
+    'missed'), as the physics, which extrudes the body alone, finds no contact. A grasp
+    through the island and then the disk: P_L judges it at the disk's walls. A grasp
+    across the disk alone: the same as without the island."""
+    from harness.quality import FAILURE_REASONS, EvaluationDraws, evaluate_draws
+    from harness.settings import resolve
+
+    grid = Grid(50, 0.2)
+    disk, _ = disk_field(grid, 0.03)
+    island, _ = disk_field(grid, 0.01, (0.0, 0.045))
+    alone = disk[None]
+    both = np.minimum(disk, island)[None]
+    settings = resolve(load_scene("disk"), {"sigma_g": 0.0, "friction": 0.5})
+    outcomes = {}
+    for name, values in (("alone", alone), ("both", both)):
+        fields = SDFBatch(grid, values, np.stack(np.gradient(values[0], grid.cell)[::-1], axis=-1)[None])
+        assert fields.regions.fragmented[0] == (name == "both")
+        draws = EvaluationDraws(fields, np.zeros((1, 2, 2)), np.zeros(1), np.full((1, 2), 0.5), 0.03)
+        grasps = np.array([[[-0.03, 0.045], [0.03, 0.045]],      # across the island alone
+                           [[0.0, 0.07], [0.0, -0.06]],          # through the island, then the disk
+                           [[-0.06, -0.005], [0.06, -0.005]]])   # across the disk alone
+        outcomes[name] = evaluate_draws(grasps, draws, settings)
+    both, alone = outcomes["both"], outcomes["alone"]
+    assert both.closure[0, 0] and not both.lifted[0, 0]
+    assert FAILURE_REASONS[both.reason[0, 0]] == "missed"
+    assert FAILURE_REASONS[alone.reason[0, 0]] == "missed"
+    # Through the island, then the disk: lifted on the disk, as without the island.
+    assert both.lifted[1, 0] == alone.lifted[1, 0] and both.lifted[1, 0]
+    assert both.lift_chance[1, 0] == pytest.approx(alone.lift_chance[1, 0], abs=1e-9)
+    np.testing.assert_array_equal(both.lifted[2], alone.lifted[2])
+    assert both.lift_chance[2, 0] == pytest.approx(alone.lift_chance[2, 0], abs=1e-9)

@@ -51,9 +51,11 @@ def test_planning_for_the_lift_keeps_the_heavy_stapler_up_where_force_closure_do
         for quality in ("force_closure", "lift"):
             plan = cls(quality=quality).plan(problem, stream(0, "stapler", 1, cls.name, quality))
             p_l[cls.name, quality] = estimate_p_f(plan.grasp, draws, problem.settings)[0].p_l
-    # Measured: 0.81 and 0.96 for the lift variants, 0.003 and 0.007 for force closure.
-    assert p_l["gp-p", "lift"] >= 0.75 and p_l["gp-gpis-opt", "lift"] >= 0.9
-    assert p_l["gp-p", "force_closure"] <= 0.05 and p_l["gp-gpis-opt", "force_closure"] <= 0.05
+    # Measured (2026-11-25, the lift judged on each sample's body): 0.998 and 0.999 for the
+    # lift variants, 0.017 and 0.078 for force closure (0.004 and 0.007 when the lift was
+    # judged on every piece of a sample: 23 % of these samples are in several pieces).
+    assert p_l["gp-p", "lift"] >= 0.9 and p_l["gp-gpis-opt", "lift"] >= 0.9
+    assert p_l["gp-p", "force_closure"] <= 0.1 and p_l["gp-gpis-opt", "force_closure"] <= 0.1
 
 
 class _Outside(Planner):
