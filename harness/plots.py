@@ -222,6 +222,33 @@ def calibration_figure(bins):
     return fig
 
 
+def calibration_by_regime_figure(bins):
+    """The reliability diagram of P_L, one panel per regime (bins with a ``regime``
+    column, from harness.report.calibration_by_regime)."""
+    regimes = list(dict.fromkeys(bins.regime))
+    cols = min(3, len(regimes))
+    rows = int(np.ceil(len(regimes) / cols))
+    fig, axes = plt.subplots(rows, cols, figsize=(3.6 * cols, 3.6 * rows), squeeze=False, constrained_layout=True)
+    for ax, regime in zip(axes.ravel(), regimes):
+        ax.plot([0, 1], [0, 1], color="0.6", ls="--", lw=1)
+        b = bins[(bins.regime == regime) & (bins.metric == "p_l")]
+        err = np.vstack([b.success_rate - b.ci_low, b.ci_high - b.success_rate])
+        ax.errorbar(b.mean_estimate, b.success_rate, yerr=err, fmt="s", color="tab:red", capsize=3)
+        for _, row in b.iterrows():
+            ax.annotate(f"{int(row.plans)}", (row.mean_estimate, row.success_rate), textcoords="offset points",
+                        xytext=(5, 5), fontsize=7, color="tab:red")
+        ax.set_xlim(0, 1.02)
+        ax.set_ylim(0, 1.02)
+        ax.set_aspect("equal")
+        ax.set_title(regime, fontsize=8)
+        ax.set_xlabel("analytic P_L of the plan", fontsize=8)
+        ax.set_ylabel("success on posterior samples", fontsize=8)
+    for ax in axes.ravel()[len(regimes):]:
+        ax.axis("off")
+    fig.suptitle("Calibration of P_L per regime (numbers: plans per bin; 95% CI)", fontsize=10)
+    return fig
+
+
 def convergence_figure(bench: dict):
     """Like the supplement's Fig. 1 (from ``bench planning``): the analytic P_F of gp-p's
     best grasp so far against its planning time (steps), and of gp-gpis-opt's answer for

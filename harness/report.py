@@ -241,6 +241,50 @@ def calibration(data: dict) -> tuple[pd.DataFrame, pd.DataFrame]:
     return pd.DataFrame(rows), pd.DataFrame(bins)
 
 
+#: The grasp settings that make a regime (harness.settings.GraspSettings): the gripper's
+#: force, the jaws' friction and its spread, and the approach noise. Objects (their size,
+#: thickness, density) vary within a regime, as over a library.
+REGIME_KEYS = ("force", "friction", "friction_spread", "sigma_g")
+
+
+def scene_regimes(config: dict) -> dict[str, str]:
+    """Each scene's regime: the REGIME_KEYS of its grasp settings as resolved in this
+    experiment (the scene's own, or the config's overrides), as a label."""
+    from harness.tasks import settings_of
+
+    cfg = ExperimentConfig.from_dict(config)
+    out = {}
+    for name, path in zip(cfg.scene_names, cfg.scenes):
+        s = settings_of(cfg, path)
+        out[name] = (f"force {s.force:g} N, friction {s.friction:g}"
+                     + (f" (spread {s.friction_spread:g})" if s.friction_spread else "")
+                     + f", sigma_g {1000 * s.sigma_g:g} mm")
+    return out
+
+
+def calibration_by_regime(data: dict) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """:func:`calibration` over each regime's plans apart (scene_regimes), as two tables
+    with a ``regime`` column; empty when every scene shares one regime."""
+    try:
+        regime = scene_regimes(data["config"])
+    except InputError:  # a scene file that moved or changed since the run: no split
+        return pd.DataFrame(), pd.DataFrame()
+    if len(set(regime.values())) < 2:
+        return pd.DataFrame(), pd.DataFrame()
+    tables, bins = [], []
+    for label in dict.fromkeys(regime.values()):
+        scenes = {s for s, r in regime.items() if r == label}
+        part = {**data, **{t: data[t][data[t].scene.isin(scenes)] for t in ("plans", "analytic", "trials")}}
+        if part["plans"].empty:
+            continue
+        cal, b = calibration(part)
+        tables.append(cal.assign(regime=label))
+        bins.append(b.assign(regime=label))
+    order = lambda frame: frame[["regime", *[c for c in frame.columns if c != "regime"]]]  # noqa: E731
+    return (order(pd.concat(tables, ignore_index=True)) if tables else pd.DataFrame(),
+            order(pd.concat(bins, ignore_index=True)) if bins else pd.DataFrame())
+
+
 def reasons(data: dict) -> pd.DataFrame:
     """The analytic verdict of each posterior trial's draw ('lifted' or the first failure
     reason) against the trial's physical outcome: counts per planner and for 'all'."""
@@ -338,8 +382,12 @@ def write_report(out_dir: Path, figures: bool = True) -> dict:
     cal, bins = calibration(data)
     fails = failures(data)
     verdicts = reasons(data)
-    for name, frame in (("summary", s), ("comparisons", comp), ("calibration", cal), ("reliability", bins),
-                        ("failures", fails), ("reasons", verdicts)):
+    by_regime, regime_bins = calibration_by_regime(data)
+    tables = [("summary", s), ("comparisons", comp), ("calibration", cal), ("reliability", bins),
+              ("failures", fails), ("reasons", verdicts)]
+    if not by_regime.empty:
+        tables += [("calibration_by_regime", by_regime), ("reliability_by_regime", regime_bins)]
+    for name, frame in tables:
         write_atomic(out_dir / f"{name}.csv", lambda tmp, frame=frame: frame.to_csv(tmp, index=False))
     engine = engine_of(data)
     md = ["# " + data["config"]["name"], "",
@@ -357,7 +405,12 @@ def write_report(out_dir: Path, figures: bool = True) -> dict:
                shown[(shown.shapes == "posterior") & (shown.scene != ALL)][["scene", *columns]]
                .to_markdown(index=False)]
     md += ["", "## Calibration of analytic P_F and P_L against physical success", "",
-           cal.to_markdown(index=False, floatfmt=".3f") if not cal.empty else "(no executed plans)", "",
+           cal.to_markdown(index=False, floatfmt=".3f") if not cal.empty else "(no executed plans)", ""]
+    if not by_regime.empty:
+        md += ["### Per regime (the scenes' force, friction and approach noise)", "",
+               by_regime[by_regime.planner == ALL].drop(columns="planner").to_markdown(index=False, floatfmt=".3f"),
+               ""]
+    md += [
            "## Trial outcomes", "", fails.to_markdown(index=False), "",
            "## Analytic verdict of each posterior trial's draw against its physical outcome (all planners)", "",
            (verdicts[verdicts.planner == ALL].drop(columns="planner").to_markdown(index=False)
@@ -374,11 +427,11 @@ def write_report(out_dir: Path, figures: bool = True) -> dict:
                                 for r in runs.itertuples()]}
     write_text(out_dir / "manifest.json", json.dumps(manifest, indent=2, default=str) + "\n")
     if figures:
-        _figures(out_dir, data, s, bins, fails)
+        _figures(out_dir, data, s, bins, fails, regime_bins)
     return {"summary": s, "comparisons": comp, "calibration": cal}
 
 
-def _figures(out_dir, data, summary, bins, fails) -> list:
+def _figures(out_dir, data, summary, bins, fails, regime_bins=None) -> list:
     """Write the report's PNGs into ``out_dir/figures``; returns their paths."""
     import matplotlib.pyplot as plt
 
@@ -404,6 +457,8 @@ def _figures(out_dir, data, summary, bins, fails) -> list:
     if not fails.empty:
         save(plots.failures_figure(fails), "failures.png")
     save(plots.calibration_figure(bins), "calibration.png")
+    if regime_bins is not None and not regime_bins.empty:
+        save(plots.calibration_by_regime_figure(regime_bins), "calibration-by-regime.png")
     bench_file = Path(out_dir) / "bench-planning.json"
     study = None
     if bench_file.is_file():  # written by: gpis-harness bench planning --json > DIR/bench-planning.json

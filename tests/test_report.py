@@ -123,3 +123,36 @@ def test_comparisons_pool_both_shape_sources(run):
     assert pooled.difference == pytest.approx((post.difference * post.pairs + truth.difference * truth.pairs)
                                               / pooled.pairs, abs=1e-12)
     assert pooled.ci_low <= pooled.difference <= pooled.ci_high
+
+
+def test_calibration_splits_by_regime_and_the_parts_pool_back():
+    """The committed reference run (rectangle at friction 0.5, marker at 0.45) spans two
+    regimes: each regime's P_L Brier is the direct mean over its trials, and the two,
+    weighted by their trials, give the pooled Brier (a second formulation); a run whose
+    scenes share one regime is not split."""
+    from pathlib import Path
+
+    from harness.report import calibration_by_regime, scene_regimes
+
+    root = Path(__file__).resolve().parents[1]
+    run = load(root / "results" / "reference")
+    # The stored config names the scene files where the reference was made: use this clone's.
+    run["config"] = {**run["config"], "scenes": [str(root / "scenes" / Path(s).name) for s in run["config"]["scenes"]]}
+    regimes = scene_regimes(run["config"])
+    assert regimes == {"rectangle": "force 20 N, friction 0.5, sigma_g 2.5 mm",
+                       "marker": "force 20 N, friction 0.45, sigma_g 2.5 mm"}
+    table, bins = calibration_by_regime(run)
+    rows = table[(table.metric == "p_l") & (table.planner == "all")].set_index("regime")
+    assert set(rows.index) == set(regimes.values()) and set(bins.regime) == set(regimes.values())
+    post = run["trials"][run["trials"].shapes == "posterior"].merge(run["analytic"],
+                                                                   on=["scene", "realisation", "planner"])
+    won = (post.outcome == "success").astype(float)
+    sq = (post.p_l - won) ** 2
+    for scene, label in regimes.items():
+        assert rows.loc[label, "brier"] == pytest.approx(sq[post.scene == scene].mean(), abs=1e-12)
+    counts = post.scene.map(regimes).value_counts()
+    pooled = sum(rows.loc[label, "brier"] * counts[label] for label in counts.index) / counts.sum()
+    whole = calibration(run)[0]
+    assert pooled == pytest.approx(whole[(whole.metric == "p_l") & (whole.planner == "all")].brier.iloc[0], abs=1e-12)
+    one = {**run, "config": {**run["config"], "scenes": [s for s in run["config"]["scenes"] if "rectangle" in s]}}
+    assert calibration_by_regime(one)[0].empty
