@@ -9,6 +9,8 @@ from functools import cached_property
 
 import numpy as np
 from scipy import ndimage
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 
 from harness.geometry import Grid
 
@@ -624,37 +626,33 @@ def body_labels(values: np.ndarray, cell: float) -> tuple[np.ndarray, int]:
     if count == 0:
         return labels, 0
     # Saddles: a cell whose diagonal corners are inside and the others not is crossed
-    # along that diagonal when its centre is inside.
-    centre = values[:, :-1, :-1] + values[:, 1:, 1:] + values[:, :-1, 1:] + values[:, 1:, :-1] < 0
+    # along that diagonal when its centre (the mean of its corners) is inside. Found on
+    # the inside mask first; the corners' values are read at the saddles only.
     a, b, c, d = inside[:, :-1, :-1], inside[:, 1:, 1:], inside[:, :-1, 1:], inside[:, 1:, :-1]
     pairs = []
-    main = centre & a & b & ~c & ~d
-    anti = centre & c & d & ~a & ~b
-    if main.any():
-        pairs.append((labels[:, :-1, :-1][main], labels[:, 1:, 1:][main]))
-    if anti.any():
-        pairs.append((labels[:, :-1, 1:][anti], labels[:, 1:, :-1][anti]))
+    for saddle, offsets in (((a & b) & ~(c | d), ((0, 0), (1, 1))), ((c & d) & ~(a | b), ((0, 1), (1, 0)))):
+        f, i, j = np.nonzero(saddle)
+        if not len(f):
+            continue
+        centre = (values[f, i, j] + values[f, i + 1, j + 1] + values[f, i, j + 1] + values[f, i + 1, j]) < 0
+        f, i, j = f[centre], i[centre], j[centre]
+        (p0, q0), (p1, q1) = offsets
+        pairs.append((labels[f, i + p0, j + q0], labels[f, i + p1, j + q1]))
     if pairs:
-        from scipy.sparse import coo_matrix
-        from scipy.sparse.csgraph import connected_components
-
         u = np.concatenate([p[0] for p in pairs]) - 1
         v = np.concatenate([p[1] for p in pairs]) - 1
         graph = coo_matrix((np.ones(len(u)), (u, v)), shape=(count, count))
         _, merged = connected_components(graph, directed=False)
         # Renumber the merged labels in order of their first label, so that each field's
         # labels stay a contiguous run in scan order.
-        order = np.full(merged.max() + 1, -1)
-        seen = 0
-        for lab in range(count):
-            if order[merged[lab]] < 0:
-                order[merged[lab]] = seen
-                seen += 1
-        table = np.concatenate([[0], order[merged] + 1])
-        labels, count = table[labels], seen
-    # Nodes outside but next to an inside node: the region of that neighbour.
-    grown = ndimage.grey_dilation(labels, footprint=side)
-    labels = np.where(inside, labels, np.where(values < 0.5 * cell, grown, 0))
+        firsts = np.sort(np.unique(merged, return_index=True)[1])
+        order = np.empty(len(firsts), dtype=labels.dtype)
+        order[merged[firsts]] = np.arange(len(firsts))
+        table = np.concatenate([[0], order[merged] + 1]).astype(labels.dtype)
+        labels, count = table[labels], len(firsts)
+    # Nodes partly inside next to an inside node: the region of that neighbour.
+    border = ~inside & (values < 0.5 * cell)
+    labels[border] = ndimage.grey_dilation(labels, footprint=side)[border]
     return labels, count
 
 

@@ -22,6 +22,10 @@ from harness.squeeze import squeeze
 #: planar ones (P_F), then the lift's for draws in force closure (P_L).
 PLANAR_REASONS = ("too_wide", "missed", "degenerate_normal", "friction_cone")
 FAILURE_REASONS = PLANAR_REASONS + LIFT_REASONS
+#: Fields of samples in several pieces whose bodies (harness.grasp.body_fields) are
+#: built at once while judging the lift: bounds the memory that costs (about 70 M^2 bytes
+#: per field) whatever the share of such samples.
+BODY_CHUNK = 32
 #: Two-sided 95 % normal quantile.
 Z95 = 1.959963984540054
 
@@ -303,22 +307,27 @@ def _on_bodies(g1, g2, field, draws: EvaluationDraws, contacts: Contacts, closur
     jaws are marched again on the body alone (harness.grasp.body_fields); then the
     squeeze on the same fields."""
     jaw, scale = settings.jaw_width, draws.torque_scale
-    split = np.flatnonzero(draws.shapes.regions.fragmented[field])
-    if not len(split):
+    on_split = draws.shapes.regions.fragmented[field]
+    if not on_split.any():
         return contacts, closure, squeeze(draws.shapes, g1, g2, field, contacts, closure, gamma, jaw, scale)
-    ids, local = np.unique(field[split], return_inverse=True)
-    bodies = body_fields(draws.shapes, ids)
-    on_body = find_contacts(bodies, g1[split], g2[split], jaw, field_index=local)
-    body_closure, _ = plate_closure(on_body, gamma[split], bodies.center_of_mass[local], scale, with_quality=False)
-    contacts = _replace_rows(contacts, split, on_body)
     closure = closure.copy()
-    closure[split] = body_closure
-    on_split = np.zeros(len(field), dtype=bool)
-    on_split[split] = True  # squeezed below, on the bodies
-    settled = squeeze(draws.shapes, g1, g2, field, contacts, closure | on_split, gamma, jaw, scale)
-    on_bodies = squeeze(bodies, g1[split], g2[split], local, _take_rows(contacts, split), body_closure,
-                        gamma[split], jaw, scale)
-    return contacts, closure, _replace_rows(settled, split, on_bodies)
+    pieces = []
+    fragmented = np.unique(field[on_split])
+    for start in range(0, len(fragmented), BODY_CHUNK):  # a bounded number of body fields at once
+        ids = fragmented[start:start + BODY_CHUNK]
+        rows = np.flatnonzero(np.isin(field, ids))
+        local = np.searchsorted(ids, field[rows])
+        bodies = body_fields(draws.shapes, ids)
+        on_body = find_contacts(bodies, g1[rows], g2[rows], jaw, field_index=local)
+        body_closure, _ = plate_closure(on_body, gamma[rows], bodies.center_of_mass[local], scale, with_quality=False)
+        contacts = _replace_rows(contacts, rows, on_body)
+        closure[rows] = body_closure
+        pieces.append((rows, squeeze(bodies, g1[rows], g2[rows], local, on_body, body_closure, gamma[rows], jaw,
+                                     scale)))
+    settled = squeeze(draws.shapes, g1, g2, field, contacts, closure | on_split, gamma, jaw, scale)  # the rest
+    for rows, part in pieces:
+        settled = _replace_rows(settled, rows, part)
+    return contacts, closure, settled
 
 
 def _take_rows(record, rows):
