@@ -330,11 +330,6 @@ def _on_bodies(g1, g2, field, draws: EvaluationDraws, contacts: Contacts, closur
     return contacts, closure, settled
 
 
-def _take_rows(record, rows):
-    """A dataclass of per-row arrays restricted to ``rows``."""
-    return type(record)(*(getattr(record, f.name)[rows] for f in dataclasses.fields(record)))
-
-
 def _replace_rows(record, rows, part):
     """A copy of a dataclass of per-row arrays with ``rows`` taken from ``part``."""
     out = {}
