@@ -370,7 +370,7 @@ def _bench_regimes(args) -> int:
     result = regimes_study.run(out=Path(args.out or "results/regimes"), engines=args.engines, workers=args.workers,
                                scheduler=args.scheduler, log=lambda line: print(line, file=sys.stderr, flush=True))
     if args.json:
-        print(json.dumps(result, indent=2, default=regimes_study._jsonable))
+        print(json.dumps(result, indent=2, default=regimes_study.jsonable))
     else:
         print("\n".join(regimes_study.format_lines(result)))
     return 0

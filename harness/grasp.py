@@ -44,6 +44,9 @@ PATCH_DEPTH = 0.0005
 WIDTH_TOLERANCE = 1e-9
 #: Directions in which a region's extreme cells are kept (Regions.hull).
 HULL_DIRECTIONS = 64
+#: Neighbours through a cell side, within one field of an (F, M, M) stack.
+_SIDES = np.zeros((3, 3, 3), dtype=bool)
+_SIDES[1] = [[0, 1, 0], [1, 1, 1], [0, 1, 0]]
 #: Work arrays of the march hold at most this many field evaluations at once.
 _MAX_EVALUATIONS = 2_000_000
 
@@ -557,15 +560,32 @@ def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
                             u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]])
 
 
-def _largest_regions(values: np.ndarray, grid: Grid, return_masks: bool = False) -> Regions:
+def _largest_regions(values: np.ndarray, grid: Grid) -> Regions:
     f, h = len(values), grid.cell
     frac = np.clip(0.5 - values / h, 0.0, 1.0)
-    labels, count = body_labels(values, h)
+    _, mine, fragmented = _bodies(values, h, frac)
     com = np.full((f, 2), np.nan)
+    w = np.where(mine, frac, 0.0)
+    total = w.sum(axis=(1, 2))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        com[:, 0] = w.sum(axis=1) @ grid.coords / total
+        com[:, 1] = w.sum(axis=2) @ grid.coords / total
+    com[total == 0] = np.nan
+    if not mine.any():
+        return Regions(np.zeros(f), com, np.full((f, 1, 2), -np.inf), fragmented)
+    return Regions(total * h * h, com, _hulls(mine, grid), fragmented)
+
+
+def _bodies(values: np.ndarray, cell: float, frac: np.ndarray | None = None):
+    """Each field's regions (:func:`body_labels`), the mask (F, M, M) of its body (the
+    region of largest fractional area; the first in scan order on a tie) and whether it
+    has other regions (F,)."""
+    f = len(values)
+    if frac is None:
+        frac = np.clip(0.5 - values / cell, 0.0, 1.0)
+    labels, count = body_labels(values, cell)
     if count == 0:
-        if return_masks:
-            return labels, np.zeros(values.shape, dtype=bool)
-        return Regions(np.zeros(f), com, np.full((f, 1, 2), -np.inf), np.zeros(f, dtype=bool))
+        return labels, np.zeros(values.shape, dtype=bool), np.zeros(f, dtype=bool)
     area = ndimage.sum_labels(frac, labels, index=np.arange(1, count + 1))
     # Labels run in scan order, so each field's regions hold a contiguous run of labels
     # (first..last); a field without any region has last < first.
@@ -580,16 +600,7 @@ def _largest_regions(values: np.ndarray, grid: Grid, return_masks: bool = False)
     best[fields] = np.minimum.reduceat(candidates, starts)
     fragmented = np.zeros(f, dtype=bool)
     fragmented[fields] = lengths > 1
-    mine = labels == best[:, None, None]
-    if return_masks:
-        return labels, mine
-    w = np.where(mine, frac, 0.0)
-    total = w.sum(axis=(1, 2))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        com[:, 0] = w.sum(axis=1) @ grid.coords / total
-        com[:, 1] = w.sum(axis=2) @ grid.coords / total
-    com[total == 0] = np.nan
-    return Regions(total * h * h, com, _hulls(mine, grid), fragmented)
+    return labels, labels == best[:, None, None], fragmented
 
 
 def body_fields(fields: SDFBatch, ids: np.ndarray) -> SDFBatch:
@@ -602,10 +613,8 @@ def body_fields(fields: SDFBatch, ids: np.ndarray) -> SDFBatch:
     h = fields.grid.cell
     values, gx, gy = fields.values[ids].copy(), fields.gx[ids].copy(), fields.gy[ids].copy()
     twist = fields.twist[ids].copy()
-    labels, mine = _largest_regions(values.astype(float), fields.grid, return_masks=True)
-    side = np.zeros((3, 3, 3), dtype=bool)
-    side[1] = [[0, 1, 0], [1, 1, 1], [0, 1, 0]]
-    near_body = ndimage.binary_dilation(mine & (values < 0), structure=side)
+    labels, mine, _ = _bodies(values.astype(float), h)
+    near_body = ndimage.binary_dilation(mine & (values < 0), structure=_SIDES)
     other = (labels > 0) & ~mine & ~near_body
     values[other] = np.maximum(values[other], h)
     gx[other], gy[other], twist[other] = 0.0, 0.0, 0.0
@@ -620,9 +629,7 @@ def body_labels(values: np.ndarray, cell: float) -> tuple[np.ndarray, int]:
     each field's labels a contiguous run, in scan order) and their number. A node partly
     inside (0 <= f < cell / 2) next to an inside node takes that node's label."""
     inside = values < 0
-    side = np.zeros((3, 3, 3), dtype=bool)
-    side[1] = [[0, 1, 0], [1, 1, 1], [0, 1, 0]]  # connect within a field only
-    labels, count = ndimage.label(inside, structure=side)
+    labels, count = ndimage.label(inside, structure=_SIDES)
     if count == 0:
         return labels, 0
     # Saddles: a cell whose diagonal corners are inside and the others not is crossed
@@ -652,7 +659,7 @@ def body_labels(values: np.ndarray, cell: float) -> tuple[np.ndarray, int]:
         labels, count = table[labels], len(firsts)
     # Nodes partly inside next to an inside node: the region of that neighbour.
     border = ~inside & (values < 0.5 * cell)
-    labels[border] = ndimage.grey_dilation(labels, footprint=side)[border]
+    labels[border] = ndimage.grey_dilation(labels, footprint=_SIDES)[border]
     return labels, count
 
 

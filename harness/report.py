@@ -262,6 +262,13 @@ def scene_regimes(config: dict) -> dict[str, str]:
     return out
 
 
+def restricted(data: dict, scenes) -> dict:
+    """The run ``data`` (:func:`load`) with its plans, analytic rows and trials restricted
+    to ``scenes`` (the config unchanged)."""
+    keep = set(scenes)
+    return {**data, **{t: data[t][data[t].scene.isin(keep)] for t in ("plans", "analytic", "trials")}}
+
+
 def calibration_by_regime(data: dict) -> tuple[pd.DataFrame, pd.DataFrame]:
     """:func:`calibration` over each regime's plans apart (scene_regimes), as two tables
     with a ``regime`` column; empty when every scene shares one regime."""
@@ -273,8 +280,7 @@ def calibration_by_regime(data: dict) -> tuple[pd.DataFrame, pd.DataFrame]:
         return pd.DataFrame(), pd.DataFrame()
     tables, bins = [], []
     for label in dict.fromkeys(regime.values()):
-        scenes = {s for s, r in regime.items() if r == label}
-        part = {**data, **{t: data[t][data[t].scene.isin(scenes)] for t in ("plans", "analytic", "trials")}}
+        part = restricted(data, [s for s, r in regime.items() if r == label])
         if part["plans"].empty:
             continue
         cal, b = calibration(part)

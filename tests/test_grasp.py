@@ -399,9 +399,9 @@ def test_bodies_are_the_largest_parts_marching_squares_draws():
     grid = Grid(40, 0.2)
     values = _smooth_fields(grid, 200, seed=11)
     regions = SDFBatch(grid, values, np.zeros(values.shape + (2,))).regions
-    from harness.grasp import _largest_regions
+    from harness.grasp import _bodies
 
-    labels, mine = _largest_regions(values, grid, return_masks=True)
+    _, mine, _ = _bodies(values, grid.cell)
     xx, yy = np.meshgrid(grid.coords, grid.coords)
     several = 0
     for k, field in enumerate(values):

@@ -63,7 +63,7 @@ def run(config_path: str = CONFIG, out: Path = Path("results/engines"), workers:
     from harness.bench.lift_study import validate
 
     result["lift"] = {engine: validate(trials=lift_trials, engine=engine) for engine in ENGINES}
-    (Path(out) / "study.json").write_text(json.dumps(result, indent=1, default=_jsonable) + "\n")
+    (Path(out) / "study.json").write_text(json.dumps(result, indent=1, default=jsonable) + "\n")
     return result
 
 
@@ -180,8 +180,10 @@ def write_frames(trials: pd.DataFrame, run: dict, folder: Path, count: int = FRA
     return out
 
 
-def _jsonable(value):
-    if isinstance(value, (np.floating, np.integer)):
+def jsonable(value):
+    """``json.dumps``'s default for the studies' results: numpy scalars as numbers,
+    anything else as its text."""
+    if isinstance(value, (np.floating, np.integer, np.bool_)):
         return value.item()
     return str(value)
 

@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from harness.bench.engines_study import jsonable
 from harness.bench.regime_objects import objects as regime_objects
 
 #: Trials per plan and analytic draws. 24 objects x 24 posterior trials give 576 trials
@@ -146,7 +147,7 @@ def run(out: Path = Path("results/regimes"), engines=("pybullet",), workers: int
     out = Path(out)
     objects = objects or regime_objects()
     scenes = write_objects(out, regimes, objects)
-    workers = workers or (None if scheduler else os.cpu_count() or 1)
+    workers = workers or os.cpu_count() or 1  # as eval: the local pool's, or the cluster's memory check
     for engine in engines:
         for regime in regimes:
             folder = output_folder(out / engine / regime.name)
@@ -154,7 +155,7 @@ def run(out: Path = Path("results/regimes"), engines=("pybullet",), workers: int
                                 truth_trials, analytic_draws)
             config = parse_config(doc, source=f"bench regimes: {regime.name}", base_dir=out,
                                   default_name=doc["name"])
-            plan_memory = check_config(config, workers or 1, None)
+            plan_memory = check_config(config, workers, None)
             with folder_lock(folder, command_line()):
                 stats = run_experiment(config, folder, workers=workers, scheduler=scheduler, log=log,
                                        plan_memory=plan_memory)
@@ -163,7 +164,7 @@ def run(out: Path = Path("results/regimes"), engines=("pybullet",), workers: int
                 log(f"{engine} {regime.name}: {stats.plans} plans and {stats.trials} trials in {stats.seconds:.0f} s")
                 write_report(folder, figures=False)
     result = study(out, engines, regimes, objects)
-    (out / "regimes.json").write_text(json.dumps(result, indent=1, default=_jsonable) + "\n")
+    (out / "regimes.json").write_text(json.dumps(result, indent=1, default=jsonable) + "\n")
     rows = pd.DataFrame(result["rows"])
     rows.to_csv(out / "regimes.csv", index=False)
     result["figure"] = str(regime_map(rows, out / "regime_map.png"))
@@ -204,16 +205,10 @@ def study(out: Path, engines=("pybullet",), regimes=REGIMES, objects=None) -> di
                         "success_varies_below": SUCCESS_VARIES_BELOW}}
 
 
-def _part(data: dict, scenes: list[str]) -> dict:
-    """The run ``data`` restricted to ``scenes``."""
-    keep = set(scenes)
-    return {**data, **{t: data[t][data[t].scene.isin(keep)] for t in ("plans", "analytic", "trials")}}
-
-
 def _regime_row(data: dict, scenes: list[str]) -> dict:
-    from harness.report import ALL, calibration
+    from harness.report import ALL, calibration, restricted
 
-    part = _part(data, scenes)
+    part = restricted(data, scenes)
     row = {"objects": len(scenes)}
     post = part["trials"][part["trials"].shapes == "posterior"]
     per_plan = post.assign(s=post.outcome == "success").groupby(["scene", "realisation", "planner"]).s.mean()
@@ -314,12 +309,6 @@ def regime_map(rows: pd.DataFrame, path: Path) -> Path:
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
-
-
-def _jsonable(value):
-    if isinstance(value, (np.floating, np.integer, np.bool_)):
-        return value.item()
-    return str(value)
 
 
 def format_lines(res: dict) -> list[str]:
