@@ -345,6 +345,20 @@ def estimate_p_f(grasps, draws: EvaluationDraws, settings: GraspSettings, lift: 
     return evaluate_draws(grasps, draws, settings, lift).estimates
 
 
+def ranking_scores(grasps, draws: EvaluationDraws, settings: GraspSettings, lift: bool):
+    """How the Monte-Carlo planners rank G grasps on shared draws: (score, tie-break),
+    each (G,). With the lift, the score is P_L with the plates' levers averaged instead
+    of drawn (``DrawOutcomes.lift_chance``: the same expectation, less variance than the
+    share of lifted draws); without, P_F. Ties (common near 0 and 1) go to the higher
+    mean Ferrari-Canny quality. gp-p ranks its candidates by it, gp-gpis-opt its
+    finalists."""
+    if lift:
+        outcomes = evaluate_draws(grasps, draws, settings)
+        return outcomes.lift_chance.mean(axis=1), outcomes.ferrari_canny.mean(axis=1)
+    estimates = estimate_p_f(grasps, draws, settings, lift=False)
+    return np.array([e.p_f for e in estimates]), np.array([e.ferrari_canny_mean for e in estimates])
+
+
 def as_starts(grasps) -> np.ndarray:
     if isinstance(grasps, Grasp):
         grasps = [grasps]

@@ -24,7 +24,7 @@ from scipy.special import ndtr
 
 from harness.grasp import OK, Grasp, SDFBatch, find_contacts, interpolate
 from harness.lift import MassBelief
-from harness.quality import draw_evaluation, estimate_p_f
+from harness.quality import draw_evaluation, ranking_scores
 from harness.scp import SCPSettings, minimize
 from planners import candidates as cand
 from planners.base import Plan, Planner, Problem, Stopwatch, check_quality
@@ -41,6 +41,8 @@ _W = np.array([wa * wb for wa in _NODE_W for wb in _NODE_W])
 _NOMINAL = int(np.flatnonzero((_K == 0).all(axis=1))[0])
 #: Posterior shape samples behind the centre of mass's mean and spread (quality "lift").
 COM_SAMPLES = 64
+#: ``finalists``' default: every optimum re-ranked with quality "lift", none with force closure.
+AUTO = -1
 #: The smoothing of the friction cone's edge (degrees): the default ``temperature_deg``.
 TEMPERATURE_DEG = 5.0
 
@@ -58,16 +60,16 @@ class GPGPISOpt(Planner):
     name = "gp-gpis-opt"
     description = "sequential convex programming on a smooth P_F (or P_L) surrogate minus an uncertainty penalty (OSQP)"
     BOUNDS = {"initialisations": (1, 1000), "screen": (1, 10_000), "nu": (0.0, 100.0),
-              "temperature_deg": (0.1, 45.0), "max_iterations": (1, 1000), "finalists": (0, 1000),
+              "temperature_deg": (0.1, 45.0), "max_iterations": (1, 1000), "finalists": (-1, 1000),
               "rerank_samples": (1, 10_000), "angular_noise_deg": (0.0, 90.0)}
 
     def __init__(self, initialisations: int = 10, screen: int = 100, nu: float = 1.0,
                  temperature_deg: float = TEMPERATURE_DEG,
-                 max_iterations: int = 20, finalists: int = 0, rerank_samples: int = 200,
+                 max_iterations: int = 20, finalists: int = AUTO, rerank_samples: int = 200,
                  angular_noise_deg: float = 10.0, quality: str = "force_closure"):
-        if min(initialisations, screen, max_iterations, rerank_samples) < 1 or finalists < 0:
+        if min(initialisations, screen, max_iterations, rerank_samples) < 1 or finalists < AUTO:
             raise ValueError("initialisations, screen, max_iterations and rerank_samples must be >= 1, "
-                             "finalists >= 0")
+                             "finalists >= -1")
         if nu < 0 or temperature_deg <= 0:
             raise ValueError("nu must be >= 0 and temperature_deg > 0")
         self.initialisations = int(initialisations)
@@ -75,10 +77,13 @@ class GPGPISOpt(Planner):
         self.nu = float(nu)
         self.temperature_deg = float(temperature_deg)
         self.max_iterations = int(max_iterations)
-        self.finalists = int(finalists)
+        self.quality = check_quality(quality)
+        # AUTO: the lift's finalists are every optimum (the surrogate does not model the
+        # squeeze, nor the lift's levers as P_L draws them); force closure keeps the
+        # paper's pick, the surrogate's best.
+        self.finalists = (self.initialisations if self.quality == "lift" else 0) if finalists == AUTO else int(finalists)
         self.rerank_samples = int(rerank_samples)
         self.angular_noise_deg = float(angular_noise_deg)
-        self.quality = check_quality(quality)
 
     def shape_samples(self) -> int:
         return (self.rerank_samples if self.finalists else 0) + (COM_SAMPLES if self.quality == "lift" else 0)
@@ -121,12 +126,13 @@ class GPGPISOpt(Planner):
         order = [i for i in order if valid[i]]
         chosen, estimate, message = None, None, ""
         if order and self.finalists > 1:
-            finalists = order[: self.finalists]
+            # Infeasible optima (out of the friction cone on the mean) are not executed
+            # (status "infeasible"): they compete only when no optimum is feasible.
+            finalists = ([i for i in order if feasible[i]] or order)[: self.finalists]
             draws = draw_evaluation(belief, self.rerank_samples, *rerank_rng.spawn(4))
-            est = estimate_p_f(jaws[finalists], draws, problem.settings, lift=self.quality == "lift")
-            values = [e.p_l if self.quality == "lift" else e.p_f for e in est]
-            pick = int(np.argmax(values))
-            chosen, estimate = finalists[pick], values[pick]
+            score, tie = ranking_scores(jaws[finalists], draws, problem.settings, self.quality == "lift")
+            pick = int(np.lexsort((-tie, -score))[0])  # as gp-p ranks: best score, then Ferrari-Canny
+            chosen, estimate = finalists[pick], float(score[pick])
             message = f"finalists re-ranked on {self.rerank_samples} draws"
             clock.lap("rerank")
         elif order:

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from harness.quality import DrawPool, estimate_p_f, evaluate_draws
+from harness.quality import DrawPool, ranking_scores
 from planners.base import Plan, Planner, Problem, check_quality
 from planners.sampling import search
 
@@ -44,11 +44,4 @@ class GPP(Planner):
 
     def _score(self, grasps, state):
         problem, draws = state
-        if self.quality == "lift":
-            # P_L with the levers averaged instead of drawn (less variance than the share of
-            # lifted draws); ties go to the higher mean Ferrari-Canny quality.
-            outcomes = evaluate_draws(grasps, draws, problem.settings)
-            return outcomes.lift_chance.mean(axis=1), outcomes.ferrari_canny.mean(axis=1)
-        estimates = estimate_p_f(grasps, draws, problem.settings, lift=False)
-        # Ties in P_F (common near 0 and 1) go to the higher mean Ferrari-Canny quality.
-        return np.array([e.p_f for e in estimates]), np.array([e.ferrari_canny_mean for e in estimates])
+        return ranking_scores(grasps, draws, problem.settings, self.quality == "lift")

@@ -15,7 +15,7 @@ import pytest
 from harness.belief import build_belief
 from harness.errors import InputError
 from harness.grasp import Grasp
-from harness.quality import default_streams, draw_evaluation, estimate_p_f
+from harness.quality import default_streams, draw_evaluation, estimate_p_f, ranking_scores
 from harness.scene import library_names, load_scene
 from harness.seeding import stream
 from harness.settings import resolve
@@ -56,6 +56,27 @@ def test_planning_for_the_lift_keeps_the_heavy_stapler_up_where_force_closure_do
     # judged on every piece of a sample: 23 % of these samples are in several pieces).
     assert p_l["gp-p", "lift"] >= 0.9 and p_l["gp-gpis-opt", "lift"] >= 0.9
     assert p_l["gp-p", "force_closure"] <= 0.1 and p_l["gp-gpis-opt", "force_closure"] <= 0.1
+
+
+def test_gp_gpis_opt_lift_picks_the_optimum_p_l_ranks_first_among_its_finalists():
+    """Stapler, realisation 1, weak (8 N) jaws: with quality "lift" the default re-ranks
+    every optimum by P_L on the planner's re-ranking draws. Its pick scores, on those same
+    draws (rebuilt here from the planner's stream), exactly its reported estimate and at
+    least as much as the surrogate's own best (finalists=0), which is one of the
+    finalists; with force closure the default stays the surrogate's best."""
+    scene = load_scene("stapler")
+    belief = build_belief(scene, stream(0, "stapler", 1, "sensor")).prepare()
+    problem = Problem.for_belief(belief, resolve(scene, {"force": 8.0}))
+    rng = lambda: stream(0, "stapler", 1, "finalists")  # noqa: E731
+    auto = GPGPISOpt(quality="lift").plan(problem, rng())
+    surrogate = GPGPISOpt(quality="lift", finalists=0).plan(problem, rng())
+    assert "re-ranked" in auto.message and "re-ranked" not in surrogate.message
+    _, rerank_rng, _ = rng().spawn(3)
+    draws = draw_evaluation(belief, 200, *rerank_rng.spawn(4))
+    score, _ = ranking_scores([auto.grasp, surrogate.grasp], draws, problem.settings, lift=True)
+    assert score[0] == pytest.approx(auto.estimate, abs=1e-12)
+    assert score[0] >= score[1]
+    assert GPGPISOpt().finalists == 0 and GPGPISOpt(quality="lift").finalists == 10
 
 
 class _Outside(Planner):
