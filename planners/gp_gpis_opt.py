@@ -81,7 +81,8 @@ class GPGPISOpt(Planner):
         # AUTO: the lift's finalists are every optimum (the surrogate does not model the
         # squeeze, nor the lift's levers as P_L draws them); force closure keeps the
         # paper's pick, the surrogate's best.
-        self.finalists = (self.initialisations if self.quality == "lift" else 0) if finalists == AUTO else int(finalists)
+        auto = self.initialisations if self.quality == "lift" else 0
+        self.finalists = auto if finalists == AUTO else int(finalists)
         self.rerank_samples = int(rerank_samples)
         self.angular_noise_deg = float(angular_noise_deg)
 
