@@ -346,34 +346,45 @@ def _plan(args) -> int:
 
 def _bench(args) -> int:
     from harness import bench
+    from harness.bench.common import jsonable
 
     if args.which == "regimes":
-        return _bench_regimes(args)
-    results = bench.run(args.which, exact_max_mb=args.exact_max_mb, sizes=args.sizes, seeds=args.seeds,
-                        scenes=args.scenes, candidates=args.candidates, first_seed=args.first_seed,
-                        shared_draws=args.shared_draws, prior_draws=args.prior_draws,
-                        out=args.out or "results/engines", workers=args.workers)
+        from harness.executor import check_scheduler
+
+        warning = check_scheduler(args.scheduler)  # before any folder or ledger exists
+        if warning:
+            print(f"{PROG}: warning: {warning}", file=sys.stderr)
+    results = bench.run(args.which, _bench_settings(args), log=lambda line: print(line, file=sys.stderr, flush=True))
     if args.json:
-        print(json.dumps(results, indent=2, default=str))
+        print(json.dumps(results, indent=2, default=jsonable))
     else:
-        print(bench.format_results(results))
+        print(bench.format_results(args.which, results))
     return 0
 
 
-def _bench_regimes(args) -> int:
-    from harness.bench import regimes_study
-    from harness.executor import check_scheduler
+def _bench_settings(args) -> dict:
+    """Each study's Settings from the command line (options a study does not take are
+    not passed to it; options not given keep the study's defaults)."""
+    from harness.bench import bandit_study, engines_study, planning_study, regimes_study, sampling_study
 
-    warning = check_scheduler(args.scheduler)  # before any folder or ledger exists
-    if warning:
-        print(f"{PROG}: warning: {warning}", file=sys.stderr)
-    result = regimes_study.run(out=Path(args.out or "results/regimes"), engines=args.engines, workers=args.workers,
-                               scheduler=args.scheduler, log=lambda line: print(line, file=sys.stderr, flush=True))
-    if args.json:
-        print(json.dumps(result, indent=2, default=regimes_study.jsonable))
-    else:
-        print("\n".join(regimes_study.format_lines(result)))
-    return 0
+    scenes = tuple(args.scenes) if args.scenes is not None else None
+    given = {k: v for k, v in {"seeds": args.seeds, "scenes": scenes, "candidates": args.candidates}.items()
+             if v is not None}
+    bandit = bandit_study.Settings(**given, first_seed=args.first_seed, shared_draws=tuple(args.shared_draws),
+                                   prior_draws=tuple(args.prior_draws))
+    sizes = {"sizes": tuple(args.sizes)} if args.sizes else {}
+    return {"sampling": sampling_study.Settings(**sizes, exact_max_mb=args.exact_max_mb),
+            "planning": planning_study.Settings(**sizes, bandit=bandit),
+            "bandit": bandit,
+            "engines": engines_study.Settings(out=Path(args.out or "results/engines"), workers=args.workers),
+            "regimes": regimes_study.Settings(out=Path(args.out or "results/regimes"), engines=tuple(args.engines),
+                                              workers=args.workers, scheduler=args.scheduler)}
+
+
+def _bench_names() -> list[str]:
+    from harness.bench import STUDIES
+
+    return list(STUDIES)
 
 
 def _engine_list(text: str) -> tuple[str, ...]:
@@ -493,8 +504,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     bench = sub.add_parser("bench", help="benchmarks, measured as ratios in one run")
     bench.add_argument("which", nargs="?", default="all",
-                       choices=["sampling", "planning", "quality", "physics", "lift", "bandit", "engines", "regimes",
-                                "all"])
+                       choices=[*_bench_names(), "all"])
     bench.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     bench.add_argument("--exact-max-mb", type=float, default=2500.0,
                        help="skip the dense exact sampler when its covariance exceeds this (default 2500)")

@@ -713,7 +713,7 @@ def test_a_sensitivity_study_adds_thompson_sampling_with_each_shared_and_prior_d
     for tol in ("1pct", "3pct"):
         for key in draws_only:
             assert summary["policies"]["thompson-shared-10"][tol][key] == summary["policies"]["thompson"][tol][key]
-    text = bench.format_results({"seeds": 1, "first_seed": 5, "scenes": ["can_opener"], "candidates": 12,
+    text = bench.format_results("bandit", {"seeds": 1, "first_seed": 5, "scenes": ["can_opener"], "candidates": 12,
                                  "summary": summary})
     assert "1 scene x seed 5, 12 candidates" in text
     assert any(line.startswith("thompson-shared-0 ") for line in text.splitlines())
@@ -756,7 +756,7 @@ def test_draws_count_from_the_answer_before_any_draw():
     # What bench bandit prints of it: the three scenes are outlines, not library scenes.
     from harness import bench
 
-    text = bench.format_results({"seeds": 1, "first_seed": 0, "scenes": ["a", "b", "c"], "candidates": 2,
+    text = bench.format_results("bandit", {"seeds": 1, "first_seed": 0, "scenes": ["a", "b", "c"], "candidates": 2,
                                  "summary": summary})
     assert "policy 0 vs 100 (inf [1.0x, inf]; 10.0x)" in " ".join(text.split())
 

@@ -90,11 +90,11 @@ def test_bench_planning_json_reports_seconds_per_estimate(monkeypatch, capsys):
     # three, the convergence study on one seed instead of three: the whole study took
     # 250 s of the suite.
     import harness.scene
-    from harness import bench
+    from harness.bench import planning_study
 
     monkeypatch.setattr(harness.scene, "library_names", lambda: ["disk", "rectangle"])
-    monkeypatch.setattr(bench, "CONVERGENCE_SEEDS", 1)
-    monkeypatch.setattr(bench, "LIFT_SEEDS", 1)
+    monkeypatch.setattr(planning_study, "CONVERGENCE_SEEDS", 1)
+    monkeypatch.setattr(planning_study, "LIFT_SEEDS", 1)
     assert main(["bench", "planning", "--sizes", "20,25", "--seeds", "0", "--json"]) == 0
     result = json.loads(capsys.readouterr().out)
     assert [r["scene"] for r in result["lift_planners"]["rows"]] == ["disk", "rectangle"]

@@ -15,11 +15,13 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 from shapely.geometry import Polygon
 
+from harness.bench.common import in_fresh_process
 from harness.belief import build_belief
 from harness.errors import InputError
 from harness.quality import default_streams, draw_evaluation, estimate_p_f
@@ -73,6 +75,29 @@ OUTLINE_LENGTH = 0.16
 OUTLINE_WIDTH = 0.08
 #: ... and reaches at most this far from its centroid (the grid keeps 2 cells clear).
 OUTLINE_REACH = 0.085
+
+
+@dataclass(frozen=True)
+class Settings:
+    """The study's size: ``seeds`` per scene (0 skips the study), the first of them
+    (another first seed gives held-out runs), the ``scenes`` (None: the library and the
+    shared outlines), the ``candidates`` of every run; ``shared_draws`` and
+    ``prior_draws`` add Thompson sampling with each of these values of shared evidence
+    and of the model prior's weight (sensitivity studies)."""
+
+    seeds: int = SEEDS
+    scenes: tuple | None = None
+    candidates: int = CANDIDATES
+    first_seed: int = 0
+    shared_draws: tuple = ()
+    prior_draws: tuple = ()
+
+    def names(self) -> list[str]:
+        """The scenes, each checked (InputError for an unknown one) before any work."""
+        names = list(self.scenes) if self.scenes is not None else study_scenes()
+        for name in names:
+            scene_of(name)
+        return names
 
 
 def allocations(shared_draws=(), prior_draws=()) -> dict:
@@ -417,3 +442,110 @@ def _quantile(values, q: float) -> float | None:
     else:
         mid = values[min(n - 1, math.ceil(q * n) - 1)]
     return float(mid) if math.isfinite(mid) else None
+
+
+def benchmark(settings: Settings = Settings()) -> dict:
+    """The study (one process per scene): per scene and seed, every gp-bandit policy's
+    best grasp before any draw and after every round judged on 1000 evaluation draws
+    against gp-p's choice; the draws (from 0) and seconds to within 1 % and 3 %, and the
+    default planners' plan times."""
+    shared_draws = [float(v) for v in settings.shared_draws]
+    prior_draws = [float(v) for v in settings.prior_draws]
+    names = settings.names()
+    head = {"seeds": settings.seeds, "first_seed": settings.first_seed, "scenes": names,
+            "candidates": settings.candidates, "shared_draws": shared_draws, "prior_draws": prior_draws}
+    if settings.seeds == 0 or not names:
+        return {**head, "runs": [], "summary": None}
+    runs = [run for name in names
+            for run in in_fresh_process(scene_runs, name, settings.seeds, settings.candidates, settings.first_seed,
+                                        shared_draws, prior_draws)]
+    return {**head, "tolerances": list(TOLERANCES), "adaptive_budget": ADAPTIVE_BUDGET,
+            "runs": runs, "summary": summarise(runs)}
+
+
+def format_lines(res: dict) -> list[str]:
+    summary = res.get("summary")
+    if not summary:
+        return ["bandit study: skipped (no seeds or no scenes)"]
+
+    def num(v, fmt):
+        return "never" if v is None else format(v, fmt)
+
+    first = res.get("first_seed", 0)
+    seeds = f"seeds {first} to {first + res['seeds'] - 1}" if res["seeds"] > 1 else f"seed {first}"
+    width = max([15] + [len(policy) + 2 for policy in summary["policies"]])
+    scenes = f"{len(res['scenes'])} scene{'' if len(res['scenes']) == 1 else 's'}"
+
+    def times(v):  # a ratio; None: infinite (uniform never within, or the policy from 0 draws) or undefined
+        return "inf" if v is None else f"{v:.1f}x" if v >= 0.1 else f"{v:.2f}x"
+
+    lines = [f"bandit study: {summary['runs']} runs ({scenes} x {seeds}, "
+             f"{res.get('candidates', 100)} candidates each); the best "
+             f"grasp before any draw (0 draws) and after every round judged on 1000 evaluation draws against "
+             f"gp-p's choice. Draws (and seconds) until it stays within 1 % / 3 %: median and 90th percentile over "
+             f"runs (never: not within the run's draws), the median of uniform's over the policy's per run, and "
+             f"the share of runs within before any draw and after 1000 draws",
+             f"{'policy':<{width}}{'median':>14}{'p90':>16}{'seconds':>15}{'uniform/pol':>15}{'at 0':>11}"
+             f"{'at 1000':>11}{'pull/draw':>10}{'judging':>9}{'plan s':>8}"]
+    for policy, row in summary["policies"].items():
+        one, three = row["1pct"], row["3pct"]
+
+        def pair(key, fmt, row1=one, row3=three):
+            return f"{num(row1[key], fmt)} / {num(row3[key], fmt)}"
+
+        def share_at(budget, row1=one, row3=three):
+            return f"{row1['within_after'].get(budget, math.nan):.2f}/{row3['within_after'].get(budget, math.nan):.2f}"
+
+        ratios = " / ".join(times(r["median_uniform_over_policy_draws"]) for r in (one, three))
+        lines.append(f"{policy:<{width}}{pair('median_draws', '.0f'):>14}{pair('p90_draws', '.0f'):>16}"
+                     f"{pair('median_seconds', '.3f'):>15}{ratios:>15}{share_at('0'):>11}{share_at('1000'):>11}"
+                     f"{num(row['pull_over_gp_p_draw'], '.2f'):>9}"
+                     f"{num(row.get('judging_over_gp_p'), '.2f'):>9}{num(row['median_plan_s'], '.3f'):>8}")
+
+    def interval(ci):
+        return "[-]" if not ci else f"[{times(ci[0])}, {times(ci[1])}]"
+
+    def share(v):
+        return "n/a" if v is None else f"{v:.2f}"
+
+    if all("uniform_over_policy_of_medians" in row["3pct"] for row in summary["policies"].values()):
+        lines.append("uniform's median draws over the policy's, 3 % / 1 %, with 95 % intervals (the scenes "
+                     "resampled, a scene's seeds together):")
+        for policy, row in summary["policies"].items():
+            lines.append(f"  {policy:<{width}}" + " / ".join(
+                f"{times(row[k]['uniform_over_policy_of_medians']['value'])} "
+                f"{interval(row[k]['uniform_over_policy_of_medians']['ci95'])}" for k in ("3pct", "1pct")))
+    model = summary.get("model")
+    if model:
+        lines.append(f"the model alone (the candidate of highest P~_F, before any draw), {model['runs']} runs: P_F "
+                     f"{model['mean_over_target']:.3f} of the target on average; within 1 % / 3 % in "
+                     f"{model['within']['1pct']:.2f} / {model['within']['3pct']:.2f} of the runs")
+    within = summary.get("candidates_within") or {}
+    lines.append(f"candidates within 3 % / 1 % of the best, by gp-p's estimates (median share over runs): "
+                 f"{share(within.get('3pct'))} / {share(within.get('1pct'))}. Draws count from 0, the answer "
+                 f"before any draw; a ratio is inf where uniform never gets within, or where the policy is within "
+                 f"from 0 draws and uniform is not")
+    for group, part in summary.get("by_scenes", {}).items():
+        within = part.get("candidates_within") or {}
+        lines.append(f"{group} ({part['runs']} runs), draws to 3 % / 1 %, median, against uniform's "
+                     f"(uniform's median over the policy's [95 % interval]; the median per-run ratio); candidates "
+                     f"within {share(within.get('3pct'))} / {share(within.get('1pct'))}:")
+        for policy, row in part["policies"].items():
+            cells = []
+            for key in ("3pct", "1pct"):
+                c = row[key]
+                mine, theirs = c["median_draws"], c["uniform_median_draws"]
+                ratio = math.nan if mine is None or theirs is None else _ratio(theirs, mine)
+                over = "-" if math.isnan(ratio) else times(ratio if math.isfinite(ratio) else None)
+                ci = " " + interval(c["uniform_over_policy_of_medians"]["ci95"]) \
+                    if "uniform_over_policy_of_medians" in c else ""
+                cells.append(f"{num(mine, '.0f')} vs {num(theirs, '.0f')} ({over}{ci}; "
+                             f"{times(c['median_uniform_over_policy_draws'])})")
+            lines.append(f"  {policy:<{width}}" + " / ".join(cells))
+    lines.append(f"uniform made gp-p's choice in {summary['uniform_is_gp_p']} of {summary['runs']} runs; "
+                 f"pull/draw: seconds per pull over gp-p's per draw, shape samples included; judging: "
+                 f"without them")
+    lines.append("library scenes, default parameters: " + ", ".join(
+        f"{k} P_F {v['mean_p_f']:.3f} in {num(v['median_plan_s'], '.3f')} s (median; mean {v['mean_plan_s']:.3f})"
+        for k, v in summary["library_defaults"].items() if v["runs"]))
+    return lines

@@ -22,18 +22,34 @@ from __future__ import annotations
 import json
 import math
 import os
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 from scipy import stats
 
+from harness.bench.common import jsonable
 from harness.protocol import ENGINES
 
 #: make eval's experiment.
 CONFIG = "experiments/default.toml"
 #: Trials on which the engines disagree whose frames the study writes, per direction.
 FRAMED = 2
+
+
+@dataclass(frozen=True)
+class Settings:
+    """The folder of the two runs, their frames and study.json; worker processes per run
+    (None: one per core)."""
+
+    out: Path = Path("results/engines")
+    workers: int | None = None
+
+
+def benchmark(settings: Settings = Settings(), log=print) -> dict:
+    """Run (or resume) make eval's experiment in each engine and set them side by side."""
+    return run(out=Path(settings.out), workers=settings.workers, log=log)
 
 
 def run(config_path: str = CONFIG, out: Path = Path("results/engines"), workers: int | None = None,
@@ -178,14 +194,6 @@ def write_frames(trials: pd.DataFrame, run: dict, folder: Path, count: int = FRA
             out.append({"trial": where.name, "folder": str(where), "recorded": [r.outcome_a, r.outcome_b],
                         "rerun": seen})
     return out
-
-
-def jsonable(value):
-    """``json.dumps``'s default for the studies' results: numpy scalars as numbers,
-    anything else as its text."""
-    if isinstance(value, (np.floating, np.integer, np.bool_)):
-        return value.item()
-    return str(value)
 
 
 def format_lines(res: dict) -> list[str]:

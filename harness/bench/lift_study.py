@@ -221,3 +221,59 @@ def manifold_levers(grasps_per_scene: int = 6, seed: int = 0) -> dict:
     return {"plates": len(f), "quartiles": [float(q) for q in np.percentile(f, [25, 50, 75])] if len(f) else [],
             "mean": float(f.mean()) if len(f) else math.nan, "single_point": single / max(len(f), 1),
             "beyond_largest": float(np.mean(f > 1.0)) if len(f) else math.nan}
+
+
+@dataclass(frozen=True)
+class Settings:
+    """Trials per offset of the bar sweeps and the seed."""
+
+    trials: int = 16
+    seed: int = 0
+
+
+def benchmark(settings: Settings = Settings()) -> dict:
+    """The bar sweeps (where P_L and simulated success fall through 0.5) and the friction
+    levers of Bullet's contact manifolds on the library trial set; the bar sweeps again
+    in MuJoCo."""
+    return {**validate(trials=settings.trials, seed=settings.seed),
+            "manifold_levers": manifold_levers(seed=settings.seed),
+            "mujoco": validate(trials=settings.trials, seed=settings.seed, engine="mujoco")}
+
+
+def format_lines(res: dict) -> list[str]:
+    lines = _bar_lines(res)
+    m = res["manifold_levers"]
+    q = m["quartiles"]
+    lines.append(f"Bullet's manifold levers on {m['plates']} plates of the library trial set, as fractions of the "
+                 f"largest admissible lever: quartiles {q[0]:.2f} / {q[1]:.2f} / {q[2]:.2f} (uniform: 0.25 / 0.50 / "
+                 f"0.75), {m['single_point']:.0%} held by one point, {m['beyond_largest']:.1%} beyond the largest")
+    if "mujoco" in res:
+        lines += ["", "the same bars in MuJoCo:", *_bar_lines(res["mujoco"])]
+    return lines
+
+
+def _bar_lines(res: dict) -> list[str]:
+    def at(v):
+        return "never" if v is None else f"{v * 1e3:.1f}"
+
+    def err(v):
+        return "-" if v is None else f"{v:+.0%}"
+
+    lines = [f"lift: bars gripped across their width, offsets from the centre of mass every "
+             f"{res['rows'][0]['points'][1]['offset'] * 1e3:.0f} mm, {res['trials_per_offset']} trials and "
+             f"{res['analytic_draws']} analytic draws per offset, sigma_g {res['sigma_g'] * 1e3:g} mm; offsets (mm) "
+             f"where P_L and success fall through 0.5, and where half the draws turn in the model and in the "
+             f"simulation; 'held at': the median angle of the turned trials that ended held",
+             f"{'bar':<44} {'P_L':>6} {'success':>8} {'error':>6} {'turns':>6} {'turned':>7} {'error':>6}"
+             f"  {'held at':>7}  failures"]
+    for r in res["rows"]:
+        held = "-" if r["held_turn_median"] is None else f"{r['held_turn_median']:.2f} rad"
+        fails = ", ".join(f"{k} {v}" for k, v in sorted(r["failures"].items())) or "none"
+        lines.append(f"{r['bar']:<44} {at(r['p_l_at']):>6} {at(r['success_at']):>8} {err(r['error']):>6} "
+                     f"{at(r['model_turning_at']):>6} {at(r['turning_at']):>7} {err(r['turning_error']):>6}"
+                     f"  {held:>7}  {fails}")
+    largest = res["largest_error"]
+    lines.append(f"largest relative error: P_L vs success {err(largest)}, the model's turning vs the "
+                 f"simulation's {err(res['largest_turning_error'])}"
+                 + (f"; {res['missing']} rows without a crossing on one side" if res["missing"] else ""))
+    return lines

@@ -136,3 +136,68 @@ def confusion(a: list[TrialResult], b: list[TrialResult]) -> dict:
             key = f"{x.outcome} -> {y.outcome}"
             pairs[key] = pairs.get(key, 0) + 1
     return dict(sorted(pairs.items(), key=lambda kv: -kv[1]))
+
+
+#: Candidate grasps per library scene in the physics benchmark (two trials each).
+GRASPS_PER_SCENE = 12
+
+
+@dataclass(frozen=True)
+class Settings:
+    """Grasps per library scene (two trials each) and the seed of the trial set."""
+
+    grasps_per_scene: int = GRASPS_PER_SCENE
+    seed: int = 0
+
+
+def benchmark(settings: Settings = Settings()) -> dict:
+    """Trials per second of Bullet's batched runner and of a naive one (a new world per
+    trial, no early stop) on the same trials, and the outcome agreement with a 4x finer
+    step; the same for MuJoCo on the same trials in the same run (its trials per second
+    over Bullet's batched runner, its agreement with its own 4x finer step and with
+    Bullet, trial by trial)."""
+    from harness.physics.simulate import outcome_counts
+
+    trials = library_trials(settings.grasps_per_scene, settings.seed).trials
+    protocol = Protocol()
+    batched = run_batched(trials, protocol)
+    naive = run_naive(trials, protocol)
+    fine = run_batched(trials, protocol.finer(4))
+    mj = Protocol.of("mujoco")
+    mujoco, mujoco_fine = run_batched(trials, mj), run_batched(trials, mj.finer(4))
+    return {
+        "mujoco": {"time_step": mj.time_step, "solver_iterations": mj.solver_iterations,
+                   "trials_per_s": mujoco.rate, "over_pybullet": mujoco.rate / batched.rate,
+                   "fine_step_agreement": agreement(mujoco.results, mujoco_fine.results),
+                   "fine_step_disagreements": confusion(mujoco.results, mujoco_fine.results),
+                   "agreement_with_pybullet": agreement(mujoco.results, batched.results),
+                   "against_pybullet": confusion(batched.results, mujoco.results),
+                   "outcomes": outcome_counts(mujoco.results),
+                   "outcomes_fine_step": outcome_counts(mujoco_fine.results),
+                   "seconds": {"batched": mujoco.seconds, "fine_step": mujoco_fine.seconds}},
+        "trials": len(trials), "time_step": protocol.time_step, "solver_iterations": protocol.solver_iterations,
+        "batched_trials_per_s": batched.rate, "naive_trials_per_s": naive.rate, "speedup": batched.rate / naive.rate,
+        "fine_step_agreement": agreement(batched.results, fine.results),
+        "fine_step_disagreements": confusion(batched.results, fine.results),
+        "naive_agreement": agreement(batched.results, naive.results),
+        "outcomes": outcome_counts(batched.results), "outcomes_fine_step": outcome_counts(fine.results),
+        "seconds": {"batched": batched.seconds, "naive": naive.seconds, "fine_step": fine.seconds},
+    }
+
+
+def format_lines(res: dict) -> list[str]:
+    mj = res["mujoco"]
+    return [f"physics: {res['trials']} trials from the library scenes, step {res['time_step']:.6g} s, "
+            f"{res['solver_iterations']} solver iterations",
+            f"batched {res['batched_trials_per_s']:.2f} trials/s, naive (a new world per trial) "
+            f"{res['naive_trials_per_s']:.2f} trials/s: speedup {res['speedup']:.2f}",
+            f"agreement with a 4x finer step: {res['fine_step_agreement']:.3f}; "
+            f"differences: {res['fine_step_disagreements'] or 'none'}",
+            "outcomes: " + ", ".join(f"{k} {v}" for k, v in res["outcomes"].items() if v),
+            f"MuJoCo, the same trials: step {mj['time_step']:.6g} s, {mj['solver_iterations']} "
+            f"iterations, {mj['trials_per_s']:.2f} trials/s, {mj['over_pybullet']:.2f}x Bullet's batched "
+            f"runner; agreement with a 4x finer step {mj['fine_step_agreement']:.3f}, with Bullet "
+            f"{mj['agreement_with_pybullet']:.3f}",
+            "MuJoCo outcomes: " + ", ".join(f"{k} {v}" for k, v in mj["outcomes"].items() if v)
+            + "; Bullet -> MuJoCo: " + (", ".join(f"{k} {v}" for k, v in mj["against_pybullet"].items())
+                                         or "no difference")]

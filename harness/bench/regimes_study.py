@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from harness.bench.engines_study import jsonable
+from harness.bench.common import jsonable
 from harness.bench.regime_objects import objects as regime_objects
 
 #: Trials per plan and analytic draws. 24 objects x 24 posterior trials give 576 trials
@@ -130,6 +130,23 @@ def write_objects(out: Path, regimes=REGIMES, objects=None) -> dict[str, list[Pa
             paths.append(path)
         written[regime.objects_key] = paths
     return written
+
+
+@dataclass(frozen=True)
+class Settings:
+    """The folder of the runs, objects and tables; the engines; worker processes per run
+    (None: one per core); a Dask scheduler (None: local processes)."""
+
+    out: Path = Path("results/regimes")
+    engines: tuple = ("pybullet",)
+    workers: int | None = None
+    scheduler: str | None = None
+
+
+def benchmark(settings: Settings = Settings(), log=print) -> dict:
+    """Run (or resume) every regime in each engine, then :func:`study`."""
+    return run(out=Path(settings.out), engines=settings.engines, workers=settings.workers,
+               scheduler=settings.scheduler, log=log)
 
 
 def run(out: Path = Path("results/regimes"), engines=("pybullet",), workers: int | None = None,
