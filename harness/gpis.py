@@ -227,7 +227,8 @@ class GPIS:
                 mean, var = self.predict(P)
                 grad, grad_var = self.predict_gradient(P, return_var=True)
                 shape = (len(ys), len(xs))
-                return mean.reshape(shape), var.reshape(shape), grad.reshape(shape + (2,)), grad_var.reshape(shape + (2,))
+                return (mean.reshape(shape), var.reshape(shape), grad.reshape(shape + (2,)),
+                        grad_var.reshape(shape + (2,)))
             ws = self._weight_space(bx, by)
             fx, dfx = bx.at(xs)
             fy, dfy = by.at(ys)

@@ -62,7 +62,8 @@ def test_input_errors_survive_a_trip_between_processes():
     from harness.errors import InputError
 
     err = pickle.loads(pickle.dumps(InputError("scene.toml", "grid.size", "5 is out of range [8, 1024]")))
-    assert (err.source, err.field, str(err)) == ("scene.toml", "grid.size", "scene.toml: grid.size: 5 is out of range [8, 1024]")
+    assert (err.source, err.field, str(err)) == ("scene.toml", "grid.size",
+                                                 "scene.toml: grid.size: 5 is out of range [8, 1024]")
 
 
 def test_quality_json_holds_the_estimate_its_interval_and_failures(capsys):

@@ -101,7 +101,8 @@ def check_against_hits(contacts, g1, g2, hits_fn, normal_fn, h, depth_tol, norma
     for i in range(len(g1)):
         u, hits = hits_fn(g1[i], g2[i])
         _, _, starts = plate_lines(g1[i], g2[i])
-        for c, n, side, origin in ((contacts.c1[i], contacts.n1[i], 0, g1[i]), (contacts.c2[i], contacts.n2[i], 1, g2[i])):
+        for c, n, side, origin in ((contacts.c1[i], contacts.n1[i], 0, g1[i]),
+                                   (contacts.c2[i], contacts.n2[i], 1, g2[i])):
             if keep is not None and not keep(c):
                 continue
             depth = (c - origin) @ u if side == 0 else (origin - c) @ u
@@ -287,7 +288,8 @@ def test_force_closure_agrees_with_a_linear_program_on_10000_configurations():
     com = rng.uniform(-0.03, 0.03, (n, 2))
     fast = force_closure(c1, c2, n1, n2, gamma)
     cos_limit = 1 / np.sqrt(1 + gamma**2)
-    margin = np.minimum(np.abs(-np.einsum("ij,ij->i", n1, u) - cos_limit), np.abs(np.einsum("ij,ij->i", n2, u) - cos_limit))
+    margin = np.minimum(np.abs(-np.einsum("ij,ij->i", n1, u) - cos_limit),
+                        np.abs(np.einsum("ij,ij->i", n2, u) - cos_limit))
     wrenches = contact_wrenches(c1, c2, n1, n2, gamma, com, 0.05)
     compared = 0
     for i in np.flatnonzero(margin > 1e-9):

@@ -100,7 +100,8 @@ def alone(tmp_path_factory):
     return _rows(out)
 
 
-@pytest.mark.parametrize("executor", [("--workers", "1"), ("--workers", "2"), ("--workers", "2", "--scheduler", "local")],
+@pytest.mark.parametrize("executor", [("--workers", "1"), ("--workers", "2"),
+                                      ("--workers", "2", "--scheduler", "local")],
                          ids=["1 worker", "2 workers", "dask local"])
 def test_hostile_plugins_cost_only_their_own_rows(alone, tmp_path, executor):
     _, seconds = _run(_config(tmp_path, hostile=True), tmp_path / "out", *executor)
