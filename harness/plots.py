@@ -249,6 +249,26 @@ def calibration_by_regime_figure(bins):
     return fig
 
 
+def leaderboard_figure(board):
+    """Success on posterior samples (Wilson 95 % intervals) against median plan time
+    (log scale), one point per planner, labelled with its rank."""
+    fig, ax = plt.subplots(figsize=(6.4, 4.2))
+    t = np.maximum(board.plan_time_median_s.to_numpy(dtype=float), 1e-3)
+    y = board.success_rate.to_numpy(dtype=float)
+    err = np.vstack([y - board.success_ci_low.to_numpy(dtype=float), board.success_ci_high.to_numpy(dtype=float) - y])
+    ax.errorbar(t, y, yerr=err, fmt="o", color="tab:blue", ms=5, capsize=3, lw=1)
+    for k, r in enumerate(board.itertuples()):
+        ax.annotate(f"{r.rank}. {r.planner}", (t[k], y[k]), textcoords="offset points", xytext=(6, 3), fontsize=8)
+    ax.set_xscale("log")
+    ax.set_xlim(t.min() / 1.5, t.max() * 5)  # room for the labels right of the points
+    ax.set_xlabel("median plan time (s)")
+    ax.set_ylabel("success on posterior samples")
+    ax.set_title("Leaderboard: success against plan time (95 % intervals)", fontsize=10)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    return fig
+
+
 def convergence_figure(bench: dict):
     """Like the supplement's Fig. 1 (from ``bench planning``): the analytic P_F of gp-p's
     best grasp so far against its planning time (steps), and of gp-gpis-opt's answer for

@@ -193,6 +193,71 @@ def comparisons(data: dict, seed: int = 0) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+LEADERBOARD_COLUMNS = ["rank", "planner", "trials", "success_rate", "success_ci_low", "success_ci_high",
+                       "difference_vs_best", "difference_ci_low", "difference_ci_high", "only_planner", "only_best",
+                       "mcnemar_p", "truth_trials", "truth_success_rate", "truth_ci_low", "truth_ci_high", "p_l",
+                       "p_l_ci_low", "p_l_ci_high", "plan_time_median_s"]
+
+
+def leaderboard(data: dict, seed: int = 0) -> pd.DataFrame:
+    """The planners ranked by pooled success on posterior samples (ties: on the true
+    shape), each with its Wilson 95 % interval; the paired difference against the best on
+    the same posterior trials, with the report's bootstrap interval (pairs resampled
+    within each plan) and McNemar's exact p; success on the true shape; the analytic P_L
+    pooled over the plans' draws; the median plan time. The rank is 1 + the number of
+    planners with a strictly higher posterior success."""
+    s = summary(data)
+    pooled = s[s.scene == ALL].sort_values(["success_rate", "truth_success_rate"], ascending=False, kind="stable")
+    if pooled.empty or pooled.success_rate.isna().all():
+        return pd.DataFrame(columns=LEADERBOARD_COLUMNS)
+    trials = data["trials"]
+    best = pooled.planner.iloc[0]
+    rng = np.random.default_rng(np.random.SeedSequence([seed, 0x1EAD]))
+    rows = []
+    for r in pooled.itertuples():
+        m = _paired(trials, r.planner, best, "posterior")
+        if r.planner == best or m.empty:
+            diff = {"difference": 0.0 if r.planner == best else np.nan, "ci_low": np.nan, "ci_high": np.nan}
+            n10 = n01 = 0
+            p = 1.0 if r.planner == best else np.nan
+        else:
+            diff = paired_difference((m.a - m.b).to_numpy(), row_groups(m, ["scene", "realisation"]), rng)
+            n10, n01, p = mcnemar(m.a.to_numpy(), m.b.to_numpy())
+        truth = trials[(trials.planner == r.planner) & (trials.shapes == "truth")]
+        rows.append({"rank": int(1 + (pooled.success_rate > r.success_rate).sum()), "planner": r.planner,
+                     "trials": r.n_trials, "success_rate": r.success_rate, "success_ci_low": r.success_ci_low,
+                     "success_ci_high": r.success_ci_high, "difference_vs_best": diff["difference"],
+                     "difference_ci_low": diff["ci_low"], "difference_ci_high": diff["ci_high"],
+                     "only_planner": n10, "only_best": n01, "mcnemar_p": p, "truth_trials": len(truth),
+                     "truth_success_rate": r.truth_success_rate, "truth_ci_low": r.truth_ci_low,
+                     "truth_ci_high": r.truth_ci_high, "p_l": r.p_l, "p_l_ci_low": r.p_l_ci_low,
+                     "p_l_ci_high": r.p_l_ci_high, "plan_time_median_s": r.plan_time_median_s})
+    return pd.DataFrame(rows, columns=LEADERBOARD_COLUMNS)
+
+
+def leaderboard_table(board: pd.DataFrame) -> pd.DataFrame:
+    """The leaderboard as a paper table: rates and differences with their intervals in one cell."""
+    def difference(r):
+        if r.rank == 1 and r.difference_vs_best == 0 and pd.isna(r.difference_ci_low):
+            return "best"
+        if pd.isna(r.difference_vs_best):
+            return "–"
+        return f"{r.difference_vs_best:+.3f} [{r.difference_ci_low:+.3f}, {r.difference_ci_high:+.3f}]"
+
+    return pd.DataFrame({
+        "rank": board["rank"], "planner": board.planner, "trials": board.trials,
+        "success (posterior)": [_fmt_rate(*v) for v in zip(board.success_rate, board.success_ci_low,
+                                                           board.success_ci_high)],
+        "vs best (paired)": [difference(r) for r in board.itertuples()],
+        "McNemar p": [("–" if r.planner == board.planner.iloc[0] or pd.isna(r.mcnemar_p) else f"{r.mcnemar_p:.2g}")
+                      for r in board.itertuples()],
+        "success (true shape)": [_fmt_rate(*v) for v in zip(board.truth_success_rate, board.truth_ci_low,
+                                                            board.truth_ci_high)],
+        "analytic P_L": [_fmt_rate(*v) for v in zip(board.p_l, board.p_l_ci_low, board.p_l_ci_high)],
+        "plan time (s)": board.plan_time_median_s.map(lambda v: "–" if pd.isna(v) else f"{v:.2f}"),
+    })
+
+
 def _bootstrap_means(d: np.ndarray, groups: list[np.ndarray], rng: np.random.Generator) -> np.ndarray:
     total = np.zeros(BOOTSTRAP)
     for g in groups:
@@ -389,8 +454,9 @@ def write_report(out_dir: Path, figures: bool = True) -> dict:
     fails = failures(data)
     verdicts = reasons(data)
     by_regime, regime_bins = calibration_by_regime(data)
+    board = leaderboard(data, seed=int(data["config"]["seed"]))
     tables = [("summary", s), ("comparisons", comp), ("calibration", cal), ("reliability", bins),
-              ("failures", fails), ("reasons", verdicts)]
+              ("failures", fails), ("reasons", verdicts), ("leaderboard", board)]
     if not by_regime.empty:
         tables += [("calibration_by_regime", by_regime), ("reliability_by_regime", regime_bins)]
     for name, frame in tables:
@@ -423,6 +489,14 @@ def write_report(out_dir: Path, figures: bool = True) -> dict:
             if not verdicts.empty else "(no analytic verdicts)"), ""]
     write_text(out_dir / "summary.md", "\n".join(md))
     write_text(out_dir / "summary.tex", _latex(s))
+    engine_line = f"Physics: {engine['name']} {engine['version'] or ''}".rstrip()
+    write_text(out_dir / "leaderboard.md",
+               "\n".join([f"# {data['config']['name']}: leaderboard", "",
+                          f"{engine_line}. Ranked by success on posterior samples (Wilson 95 % intervals); "
+                          "'vs best': the paired difference on the same posterior trials (bootstrap 95 % "
+                          "interval, pairs resampled within each plan) and McNemar's exact p.", "",
+                          leaderboard_table(board).to_markdown(index=False), ""]))
+    write_text(out_dir / "leaderboard.tex", _leaderboard_latex(board))
     for table in ("trials", "plans"):
         write_atomic(out_dir / f"{table}.parquet", lambda tmp, table=table: data[table].to_parquet(tmp, index=False))
     runs = data["runs"]
@@ -433,11 +507,26 @@ def write_report(out_dir: Path, figures: bool = True) -> dict:
                                 for r in runs.itertuples()]}
     write_text(out_dir / "manifest.json", json.dumps(manifest, indent=2, default=str) + "\n")
     if figures:
-        _figures(out_dir, data, s, bins, fails, regime_bins)
-    return {"summary": s, "comparisons": comp, "calibration": cal}
+        _figures(out_dir, data, s, bins, fails, regime_bins, board)
+    return {"summary": s, "comparisons": comp, "calibration": cal, "leaderboard": board}
 
 
-def _figures(out_dir, data, summary, bins, fails, regime_bins=None) -> list:
+def _leaderboard_latex(board: pd.DataFrame) -> str:
+    """booktabs table of the leaderboard; the best planner's row in bold."""
+    shown = leaderboard_table(board)
+    esc = (lambda text: str(text).replace("_", r"\_").replace("%", r"\%").replace("–", "--"))
+    lines = [r"\begin{tabular}{rl" + "r" * (shown.shape[1] - 2) + "}", r"\toprule",
+             " & ".join(esc(c) for c in shown.columns) + r" \\", r"\midrule"]
+    for _, row in shown.iterrows():
+        cells = [esc(v) for v in row]
+        if row["rank"] == 1:
+            cells = [r"\textbf{" + c + "}" for c in cells]
+        lines.append(" & ".join(cells) + r" \\")
+    lines += [r"\bottomrule", r"\end{tabular}", ""]
+    return "\n".join(lines)
+
+
+def _figures(out_dir, data, summary, bins, fails, regime_bins=None, board=None) -> list:
     """Write the report's PNGs into ``out_dir/figures``; returns their paths."""
     import matplotlib.pyplot as plt
 
@@ -463,6 +552,8 @@ def _figures(out_dir, data, summary, bins, fails, regime_bins=None) -> list:
     if not fails.empty:
         save(plots.failures_figure(fails), "failures.png")
     save(plots.calibration_figure(bins), "calibration.png")
+    if board is not None and not board.empty:
+        save(plots.leaderboard_figure(board), "leaderboard.png")
     if regime_bins is not None and not regime_bins.empty:
         save(plots.calibration_by_regime_figure(regime_bins), "calibration-by-regime.png")
     bench_file = Path(out_dir) / "bench-planning.json"

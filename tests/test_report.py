@@ -10,7 +10,8 @@ import pytest
 from scipy import stats
 
 from harness.ledger import FILENAME, Ledger
-from harness.report import calibration, comparison_pairs, comparisons, load, reasons, summary
+from harness.report import (calibration, comparison_pairs, comparisons, leaderboard, leaderboard_table, load,
+                            reasons, summary)
 
 SCENES = ("alpha", "beta")
 PLANNERS = ("mean-shape", "gp-p")
@@ -100,6 +101,39 @@ def test_the_verdicts_of_the_draws_meet_their_trials_outcomes(run):
     assert overall.loc["weight_torque", "slipped"] == (post[post.trial >= 2].outcome == "slipped").sum()
     assert overall.to_numpy().sum() == len(post)
     assert list(table.planner.unique()) == ["all", *PLANNERS]
+
+
+def test_the_leaderboard_ranks_by_posterior_success_with_wilson_intervals_and_paired_differences(run):
+    """Against direct computations: the order by pooled posterior success, the Wilson
+    interval from its closed form, the difference against the best as the mean of the
+    paired differences on the same trials, McNemar's p as the exact binomial test of the
+    discordant pairs, and a bootstrap interval around the difference."""
+    board = leaderboard(run)
+    post = run["trials"][run["trials"].shapes == "posterior"]
+    won = post.assign(s=post.outcome == "success")
+    rates = won.groupby("planner").s.mean().sort_values(ascending=False)
+    assert list(board.planner) == list(rates.index) and list(board["rank"]) == [1, 2]
+    z = stats.norm.ppf(0.975)
+    for r in board.itertuples():
+        k, n = int(won[won.planner == r.planner].s.sum()), int((won.planner == r.planner).sum())
+        centre = (k + z * z / 2) / (n + z * z)
+        half = z * np.sqrt(k * (n - k) / n + z * z / 4) / (n + z * z)
+        assert (r.trials, r.success_rate) == (n, pytest.approx(k / n, abs=1e-12))
+        assert (r.success_ci_low, r.success_ci_high) == (pytest.approx(centre - half, abs=1e-9),
+                                                         pytest.approx(centre + half, abs=1e-9))
+    best, second = board.iloc[0], board.iloc[1]
+    assert best.difference_vs_best == 0 and best.mcnemar_p == 1
+    keys = ["scene", "realisation", "trial"]
+    pairs = won[won.planner == second.planner][keys + ["s"]].merge(won[won.planner == best.planner][keys + ["s"]],
+                                                                     on=keys)
+    a, b = pairs.s_x.astype(int).to_numpy(), pairs.s_y.astype(int).to_numpy()
+    assert second.difference_vs_best == pytest.approx((a - b).mean(), abs=1e-12)
+    n10, n01 = int(((a == 1) & (b == 0)).sum()), int(((a == 0) & (b == 1)).sum())
+    assert (second.only_planner, second.only_best) == (n10, n01)
+    assert second.mcnemar_p == pytest.approx(stats.binomtest(n10, n10 + n01, 0.5).pvalue, abs=1e-12)
+    assert second.difference_ci_low < second.difference_vs_best < second.difference_ci_high
+    table = leaderboard_table(board)
+    assert table["vs best (paired)"].iloc[0] == "best" and table["McNemar p"].iloc[0] == "–"
 
 
 def test_lift_variants_are_compared_with_their_own_baseline_and_with_the_paper_quality():
