@@ -237,8 +237,10 @@ def leaderboard(data: dict, seed: int = 0) -> pd.DataFrame:
 
 def leaderboard_table(board: pd.DataFrame) -> pd.DataFrame:
     """The leaderboard as a paper table: rates and differences with their intervals in one cell."""
+    best = board.planner.iloc[0] if len(board) else None
+
     def difference(r):
-        if r.rank == 1 and r.difference_vs_best == 0 and pd.isna(r.difference_ci_low):
+        if r.planner == best:
             return "best"
         if pd.isna(r.difference_vs_best):
             return "–"
@@ -249,7 +251,7 @@ def leaderboard_table(board: pd.DataFrame) -> pd.DataFrame:
         "success (posterior)": [_fmt_rate(*v) for v in zip(board.success_rate, board.success_ci_low,
                                                            board.success_ci_high)],
         "vs best (paired)": [difference(r) for r in board.itertuples()],
-        "McNemar p": [("–" if r.planner == board.planner.iloc[0] or pd.isna(r.mcnemar_p) else f"{r.mcnemar_p:.2g}")
+        "McNemar p": [("–" if r.planner == best or pd.isna(r.mcnemar_p) else f"{r.mcnemar_p:.2g}")
                       for r in board.itertuples()],
         "success (true shape)": [_fmt_rate(*v) for v in zip(board.truth_success_rate, board.truth_ci_low,
                                                             board.truth_ci_high)],
