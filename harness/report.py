@@ -205,7 +205,8 @@ def leaderboard(data: dict, seed: int = 0) -> pd.DataFrame:
     the same posterior trials, with the report's bootstrap interval (pairs resampled
     within each plan) and McNemar's exact p; success on the true shape; the analytic P_L
     pooled over the plans' draws; the median plan time. The rank is 1 + the number of
-    planners with a strictly higher posterior success."""
+    planners with a strictly higher posterior success (none for a planner without
+    trials, listed last)."""
     s = summary(data)
     pooled = s[s.scene == ALL].sort_values(["success_rate", "truth_success_rate"], ascending=False, kind="stable")
     if pooled.empty or pooled.success_rate.isna().all():
@@ -224,7 +225,8 @@ def leaderboard(data: dict, seed: int = 0) -> pd.DataFrame:
             diff = paired_difference((m.a - m.b).to_numpy(), row_groups(m, ["scene", "realisation"]), rng)
             n10, n01, p = mcnemar(m.a.to_numpy(), m.b.to_numpy())
         truth = trials[(trials.planner == r.planner) & (trials.shapes == "truth")]
-        rows.append({"rank": int(1 + (pooled.success_rate > r.success_rate).sum()), "planner": r.planner,
+        rank = int(1 + (pooled.success_rate > r.success_rate).sum()) if pd.notna(r.success_rate) else None
+        rows.append({"rank": rank, "planner": r.planner,
                      "trials": r.n_trials, "success_rate": r.success_rate, "success_ci_low": r.success_ci_low,
                      "success_ci_high": r.success_ci_high, "difference_vs_best": diff["difference"],
                      "difference_ci_low": diff["ci_low"], "difference_ci_high": diff["ci_high"],
@@ -232,7 +234,7 @@ def leaderboard(data: dict, seed: int = 0) -> pd.DataFrame:
                      "truth_success_rate": r.truth_success_rate, "truth_ci_low": r.truth_ci_low,
                      "truth_ci_high": r.truth_ci_high, "p_l": r.p_l, "p_l_ci_low": r.p_l_ci_low,
                      "p_l_ci_high": r.p_l_ci_high, "plan_time_median_s": r.plan_time_median_s})
-    return pd.DataFrame(rows, columns=LEADERBOARD_COLUMNS)
+    return pd.DataFrame(rows, columns=LEADERBOARD_COLUMNS).astype({"rank": "Int64"})
 
 
 def leaderboard_table(board: pd.DataFrame) -> pd.DataFrame:
@@ -247,7 +249,8 @@ def leaderboard_table(board: pd.DataFrame) -> pd.DataFrame:
         return f"{r.difference_vs_best:+.3f} [{r.difference_ci_low:+.3f}, {r.difference_ci_high:+.3f}]"
 
     return pd.DataFrame({
-        "rank": board["rank"], "planner": board.planner, "trials": board.trials,
+        "rank": board["rank"].map(lambda v: "–" if pd.isna(v) else str(v)), "planner": board.planner,
+        "trials": board.trials,
         "success (posterior)": [_fmt_rate(*v) for v in zip(board.success_rate, board.success_ci_low,
                                                            board.success_ci_high)],
         "vs best (paired)": [difference(r) for r in board.itertuples()],
@@ -521,7 +524,7 @@ def _leaderboard_latex(board: pd.DataFrame) -> str:
              " & ".join(esc(c) for c in shown.columns) + r" \\", r"\midrule"]
     for _, row in shown.iterrows():
         cells = [esc(v) for v in row]
-        if row["rank"] == 1:
+        if row["rank"] == "1":
             cells = [r"\textbf{" + c + "}" for c in cells]
         lines.append(" & ".join(cells) + r" \\")
     lines += [r"\bottomrule", r"\end{tabular}", ""]
