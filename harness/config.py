@@ -61,9 +61,14 @@ class ExperimentConfig:
             object.__setattr__(self, "scene_names", stored_scene_names(asdict(self)))
 
     def content(self) -> dict:
-        """What determines the results: the settings and the scene files' text."""
+        """What determines the results of every planner alike: the settings and the scene
+        files' text. Not the planners: each planner's rows are its own (its own random
+        stream and trial batches, keyed by its label), so a config with a planner more
+        or fewer is the same experiment, and resuming it plans and simulates only the
+        planners not yet recorded (harness.experiment checks that a recorded label was
+        planned with the same planner and parameters)."""
         d = asdict(self)
-        for key in ("source", "name", "scene_names"):
+        for key in ("source", "name", "scene_names", "planners"):
             d.pop(key)
         d["scenes"] = {name: hashlib.sha256(Path(p).read_bytes()).hexdigest()
                        for name, p in zip(self.scene_names, self.scenes, strict=True)}

@@ -5,12 +5,14 @@ the main loop, the only writer of the ledger.
 
 from __future__ import annotations
 
+import json
 import sqlite3
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from harness.config import ExperimentConfig
+from harness.errors import InputError
 from harness.manifest import environment
 from harness.tasks import batches_of, run_batch, run_cell
 
@@ -43,6 +45,7 @@ def run_experiment(config: ExperimentConfig, out_dir: Path, workers: int | None 
         with Ledger(out_dir / FILENAME) as ledger:
             if fresh:
                 ledger.forget(key)
+            _check_planners(ledger, config, out_dir)
             run = ledger.start_run(key, config.name, config.as_dict(), environment())
             try:
                 todo, counts = _work_left(ledger, config)
@@ -78,6 +81,20 @@ def run_experiment(config: ExperimentConfig, out_dir: Path, workers: int | None 
     return stats
 
 
+def _check_planners(ledger, config: ExperimentConfig, out_dir: Path) -> None:
+    """A label already recorded in this experiment must name the same planner with the
+    same parameters: its rows are reused as they are (InputError otherwise, before any work)."""
+    recorded = ledger.planner_entries(config.hash)
+    for entry in config.planners:
+        mine = (entry.name, json.dumps(entry.params, sort_keys=True))
+        other = sorted(recorded.get(entry.label, set()) - {mine})
+        if other:
+            name, params = other[0]
+            raise InputError(str(out_dir), f"planners.{entry.label}",
+                             f"recorded here as {name} with parameters {params}, the config gives {entry.name} "
+                             f"with {mine[1]}: give the planner another label, or start over with --fresh")
+
+
 def _work_left(ledger, config: ExperimentConfig) -> tuple[list, tuple[int, int, int, int]]:
     """Cells with work left, as (path, realisation, labels to plan, plans already done,
     trials done), and the counts (plans, trials, plans done, trials done)."""
@@ -86,8 +103,9 @@ def _work_left(ledger, config: ExperimentConfig) -> tuple[list, tuple[int, int, 
     n_plans = n_trials = done_plans = done_trials = 0
     per_plan = config.posterior_trials + config.truth_trials
     for path, name, r in config.cells():
-        plans = ledger.plan_rows(key, name, r)
-        trials = ledger.done_trials(key, name, r)
+        mine = {e.label for e in config.planners}  # rows of planners no longer in the config stay, unused
+        plans = {label: row for label, row in ledger.plan_rows(key, name, r).items() if label in mine}
+        trials = {t for t in ledger.done_trials(key, name, r) if t[0] in mine}
         labels = tuple(e.label for e in config.planners if e.label not in plans)
         n_plans += len(config.planners)
         n_trials += len(config.planners) * per_plan

@@ -203,6 +203,15 @@ class Ledger:
             for table in ("runs", "plans", "analytic", "trials"):
                 self.db.execute(f"DELETE FROM {table} WHERE config_hash = ?", (config_hash,))
 
+    def planner_entries(self, config_hash: str) -> dict[str, set[tuple[str, str]]]:
+        """Per planner label recorded under a config hash: the (registry name, parameters
+        as JSON) of its plans."""
+        out: dict[str, set[tuple[str, str]]] = {}
+        for label, name, params in self.db.execute("SELECT DISTINCT planner, planner_name, params FROM plans "
+                                                   "WHERE config_hash = ?", (config_hash,)):
+            out.setdefault(label, set()).add((name, params))
+        return out
+
     def runs(self) -> pd.DataFrame:
         return pd.read_sql_query("SELECT * FROM runs ORDER BY run", self.db)
 

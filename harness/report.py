@@ -47,8 +47,12 @@ def load(out_dir: Path, config_hash: str | None = None) -> dict:
         runs = runs[runs.config_hash == key]
         out = {"hash": key, "runs": runs, "config": json.loads(runs.iloc[-1].config),
                "environment": json.loads(runs.iloc[-1].environment)}
+        labels = {p["label"] for p in out["config"]["planners"]}
         for table in ("plans", "analytic", "trials"):
-            out[table] = ledger.table(key, table)
+            rows = ledger.table(key, table)
+            # The latest config's planners: an experiment's ledger may hold the rows of a
+            # planner a later config dropped (the config hash does not cover the planners).
+            out[table] = rows[rows.planner.isin(labels)].reset_index(drop=True)
     return out
 
 

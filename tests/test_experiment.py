@@ -157,6 +157,41 @@ def test_results_do_not_depend_on_workers_or_executor(tiny_run, tmp_path):
         pd.testing.assert_frame_equal(trials, reference[1])
 
 
+def test_a_planner_added_to_a_finished_run_is_the_only_one_planned_and_simulated(tiny_run, tmp_path, capsys):
+    """The config hash leaves the planners out: the tiny experiment run first without
+    gp-gpis-opt, then with it into the same folder, plans and simulates gp-gpis-opt alone
+    (the others' plan rows are not rewritten) and gives the tables of the whole run at
+    once; the same label with other parameters is one line and exit 2."""
+    config, reference_out = tiny_run
+    reference = _tables(reference_out)
+    opt = TINY[TINY.index("[[planners]]\nname = \"gp-gpis-opt\""):]
+    first = _write(tmp_path, TINY.replace(opt, ""), "first.toml")
+    out = tmp_path / "out"
+    assert _eval(first, out, "--workers", "2", "--no-report") == 0
+    with closing(sqlite3.connect(out / "ledger.sqlite")) as db:
+        before = db.execute("SELECT planner, scene, realisation, plan_time_s FROM plans").fetchall()
+        trials_before = db.execute("SELECT COUNT(*) FROM trials").fetchone()[0]
+    assert {row[0] for row in before} == {"mean-shape", "gp-p"} and trials_before == 2 * 2 * (6 + 2)
+    capsys.readouterr()
+    assert _eval(config, out, "--workers", "2") == 0
+    assert "resuming with 4 plans and 32 trials done" in capsys.readouterr().err
+    with closing(sqlite3.connect(out / "ledger.sqlite")) as db:
+        after = db.execute("SELECT planner, scene, realisation, plan_time_s FROM plans "
+                           "WHERE planner != 'opt'").fetchall()
+    assert sorted(after) == sorted(before)
+    summary, trials = _tables(out)
+    pd.testing.assert_frame_equal(summary, reference[0])
+    pd.testing.assert_frame_equal(trials, reference[1])
+    # The report of the first config again: its two planners only.
+    assert _eval(first, out, "--workers", "1") == 0
+    assert set(pd.read_csv(out / "summary.csv").planner) == {"mean-shape", "gp-p"}
+    changed = _write(tmp_path, TINY.replace("initialisations = 3", "initialisations = 4"), "changed.toml")
+    capsys.readouterr()
+    assert _eval(changed, out, "--workers", "1") == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "planners.opt" in err[0] and "another label" in err[0]
+
+
 def _ledger_trials(ledger: Path) -> int:
     """Trial rows in a ledger that another process is writing (-1 before it has any)."""
     if not ledger.exists():
