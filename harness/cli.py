@@ -124,6 +124,17 @@ def _scenes_render(args) -> int:
     return 0
 
 
+def _scenes_generate(args) -> int:
+    from harness.procedural import object_set, write_set
+    from harness.scene import load_scene
+
+    paths = write_set(Path(args.out), object_set(args.per_family))
+    for path in paths:  # each a valid scene, or the command says which is not
+        load_scene(path)
+    print(f"{len(paths)} procedural scenes in {args.out} (harness/procedural.py; docs/scenes.md)")
+    return 0
+
+
 def _scene_and_grasp(args):
     """The scene, the --grasp and the grasp settings of a command; a grasp the gripper
     cannot execute is bad input."""
@@ -432,6 +443,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default="results/scenes", help="folder (default results/scenes)")
     p.add_argument("--seed", type=_seed, default=0, help="experiment seed (default 0)")
     p.set_defaults(func=_scenes_render)
+    p = ssub.add_parser("generate", help="write the procedural object set as scene files into a folder")
+    p.add_argument("--out", default="results/procedural", help="folder (default results/procedural)")
+    p.add_argument("--per-family", type=_positive_int, default=20,
+                   help="objects of each of the six families (default 20: 120 objects)")
+    p.set_defaults(func=_scenes_generate)
 
     p = sub.add_parser("quality", help="Monte-Carlo probabilities of force closure (P_F) and lift (P_L) of one grasp")
     p.add_argument("scene", help="library name or path to a scene file")
