@@ -102,8 +102,8 @@ def _work_left(ledger, config: ExperimentConfig) -> tuple[list, tuple[int, int, 
     todo = []
     n_plans = n_trials = done_plans = done_trials = 0
     per_plan = config.posterior_trials + config.truth_trials
+    mine = {e.label for e in config.planners}  # rows of planners no longer in the config stay, unused
     for path, name, r in config.cells():
-        mine = {e.label for e in config.planners}  # rows of planners no longer in the config stay, unused
         plans = {label: row for label, row in ledger.plan_rows(key, name, r).items() if label in mine}
         trials = {t for t in ledger.done_trials(key, name, r) if t[0] in mine}
         labels = tuple(e.label for e in config.planners if e.label not in plans)

@@ -432,19 +432,23 @@ def engine_of(data: dict) -> dict:
     return {"name": name, "version": (data["environment"].get("packages") or {}).get(name)}
 
 
+def _tex(text) -> str:
+    """A table cell as LaTeX text."""
+    return str(text).replace("_", r"\_").replace("%", r"\%").replace("–", "--")
+
+
 def _latex(s: pd.DataFrame) -> str:
     """booktabs table; the best posterior success per scene in bold."""
     shown = display_table(s).drop(columns=["complete"])
     best = s.groupby("scene").success_rate.transform("max")
-    esc = (lambda text: str(text).replace("_", r"\_").replace("%", r"\%").replace("–", "--"))
     lines = [r"\begin{tabular}{ll" + "r" * (shown.shape[1] - 2) + "}", r"\toprule",
-             " & ".join(esc(c) for c in shown.columns) + r" \\", r"\midrule"]
+             " & ".join(_tex(c) for c in shown.columns) + r" \\", r"\midrule"]
     previous = None
     for i, row in shown.iterrows():
         if previous is not None and row.scene != previous:
             lines.append(r"\midrule")
         previous = row.scene
-        cells = [esc(v) for v in row]
+        cells = [_tex(v) for v in row]
         if not pd.isna(s.success_rate[i]) and s.success_rate[i] == best[i]:
             cells[3] = r"\textbf{" + cells[3] + "}"
         lines.append(" & ".join(cells) + r" \\")
@@ -471,8 +475,8 @@ def write_report(out_dir: Path, figures: bool = True) -> dict:
     for name, frame in tables:
         write_atomic(out_dir / f"{name}.csv", lambda tmp, frame=frame: frame.to_csv(tmp, index=False))
     engine = engine_of(data)
-    md = ["# " + data["config"]["name"], "",
-          f"Physics: {engine['name']} {engine['version'] or ''}".rstrip() + " (docs/physics.md).", "",
+    engine_line = f"Physics: {engine['name']} {engine['version'] or ''}".rstrip()
+    md = ["# " + data["config"]["name"], "", engine_line + " (docs/physics.md).", "",
           display_table(s).to_markdown(index=False), ""]
     if not comp.empty:
         shown = comp.copy()
@@ -498,7 +502,6 @@ def write_report(out_dir: Path, figures: bool = True) -> dict:
             if not verdicts.empty else "(no analytic verdicts)"), ""]
     write_text(out_dir / "summary.md", "\n".join(md))
     write_text(out_dir / "summary.tex", _latex(s))
-    engine_line = f"Physics: {engine['name']} {engine['version'] or ''}".rstrip()
     write_text(out_dir / "leaderboard.md",
                "\n".join([f"# {data['config']['name']}: leaderboard", "",
                           f"{engine_line}. Ranked by success on posterior samples (Wilson 95 % intervals); "
@@ -523,11 +526,10 @@ def write_report(out_dir: Path, figures: bool = True) -> dict:
 def _leaderboard_latex(board: pd.DataFrame) -> str:
     """booktabs table of the leaderboard; the best planner's row in bold."""
     shown = leaderboard_table(board)
-    esc = (lambda text: str(text).replace("_", r"\_").replace("%", r"\%").replace("–", "--"))
     lines = [r"\begin{tabular}{rl" + "r" * (shown.shape[1] - 2) + "}", r"\toprule",
-             " & ".join(esc(c) for c in shown.columns) + r" \\", r"\midrule"]
+             " & ".join(_tex(c) for c in shown.columns) + r" \\", r"\midrule"]
     for _, row in shown.iterrows():
-        cells = [esc(v) for v in row]
+        cells = [_tex(v) for v in row]
         if row["rank"] == "1":
             cells = [r"\textbf{" + c + "}" for c in cells]
         lines.append(" & ".join(cells) + r" \\")
