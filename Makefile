@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: setup eval eval-quick test test-all scenes bench clean
+.PHONY: setup eval eval-quick benchmark test test-all scenes bench clean
 
 setup: $(STAMP)
 
@@ -35,6 +35,13 @@ eval: setup
 eval-quick: setup
 	$(BIN)/gpis-harness eval experiments/quick.toml
 
+# The benchmark's three tiers (docs/benchmark.md), each its own resumable run in
+# results/benchmark-TIER with its leaderboard; about TIMES on this 2-core machine.
+benchmark: setup
+	$(BIN)/gpis-harness eval experiments/benchmark-easy.toml
+	$(BIN)/gpis-harness eval experiments/benchmark-standard.toml
+	$(BIN)/gpis-harness eval experiments/benchmark-hard.toml
+
 # Test files run in parallel on up to 4 processes (pytest-xdist; one per core here): each
 # file on one process, so its module fixtures are built once. On this 2-core machine the
 # suite took 319 s this way against about 555 s in one process (2026-11-25).
@@ -53,4 +60,4 @@ bench: setup
 	$(BIN)/gpis-harness bench all
 
 clean:
-	rm -rf $(VENV) .pytest_cache .hypothesis results/scenes results/default results/quick
+	rm -rf $(VENV) .pytest_cache .hypothesis results/scenes results/default results/quick results/benchmark-*

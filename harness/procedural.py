@@ -80,6 +80,8 @@ def make(family: str, index: int, seed: int, held_out: bool = False, name: str |
     return ProceduralObject(name or f"{family}_{index}", family, index, shape, _regions(rng, shape), held_out)
 
 
+#: Where the default set is committed (the benchmark tiers' objects, experiments/benchmark-*.toml).
+LIBRARY_SET = Path(__file__).resolve().parents[1] / "scenes" / "procedural"
 #: The seed of :func:`object_set`'s objects and settings (not an experiment's: the
 #: objects are part of the benchmark).
 SET_SEED = 20261126

@@ -56,3 +56,14 @@ def test_scenes_generate_writes_the_set_and_refuses_a_file_as_folder(tmp_path, c
     assert main(["scenes", "generate", "--out", str(tmp_path / "file")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "not a folder" in err[0]
+
+
+def test_the_committed_set_is_the_generators_output():
+    """scenes/procedural (the benchmark tiers' objects, experiments/benchmark-*.toml) holds
+    exactly the files `gpis-harness scenes generate` writes, byte for byte: the set is
+    the project's own making and regenerates from harness/procedural.py alone."""
+    folder = pr.LIBRARY_SET
+    objects = pr.object_set()
+    assert sorted(p.name for p in folder.glob("*")) == sorted(f"{o.obj.name}.toml" for o in objects)
+    for o in objects:
+        assert (folder / f"{o.obj.name}.toml").read_text() == o.scene_text(), o.obj.name
