@@ -257,10 +257,20 @@ def leaderboard_figure(board):
     y = board.success_rate.to_numpy(dtype=float)
     err = np.vstack([y - board.success_ci_low.to_numpy(dtype=float), board.success_ci_high.to_numpy(dtype=float) - y])
     ax.errorbar(t, y, yerr=err, fmt="o", color="tab:blue", ms=5, capsize=3, lw=1)
+    # A label goes right of its point, or left when the next point to the right is close
+    # (within half a decade of plan time and 5 % of the success range), so that it does
+    # not run over that point.
+    span = max(np.ptp(y[np.isfinite(y)]) if np.isfinite(y).any() else 0.0, 0.05)
+    order = np.argsort(t, kind="stable")
+    left = np.zeros(len(t), dtype=bool)
+    for a, b in zip(order[:-1], order[1:]):
+        left[a] = np.log10(t[b] / t[a]) < 0.5 and abs(y[b] - y[a]) < 0.05 * span
     for k, r in enumerate(board.itertuples()):
-        ax.annotate(f"{r.rank}. {r.planner}", (t[k], y[k]), textcoords="offset points", xytext=(6, 3), fontsize=8)
+        ax.annotate(f"{r.rank}. {r.planner}", (t[k], y[k]), textcoords="offset points", fontsize=8,
+                    xytext=(-6, 3) if left[k] else (6, 3), ha="right" if left[k] else "left",
+                    bbox={"boxstyle": "square,pad=0.1", "fc": "white", "ec": "none", "alpha": 0.7})
     ax.set_xscale("log")
-    ax.set_xlim(t.min() / 1.5, t.max() * 5)  # room for the labels right of the points
+    ax.set_xlim(t.min() / (5 if left.any() else 1.5), t.max() * 5)  # room for the labels
     ax.set_xlabel("median plan time (s)")
     ax.set_ylabel("success on posterior samples")
     ax.set_title("Leaderboard: success against plan time (95 % intervals)", fontsize=10)
