@@ -268,6 +268,8 @@ def _print_report(out: Path, figures: bool) -> None:
     with storage(out, "cannot write the report"):
         tables = write_report(out, figures=figures)
     print(display_table(tables["summary"]).to_markdown(index=False))
+    if tables["budget_note"]:
+        print(f"\nnote: {tables['budget_note']}", file=sys.stderr)
     print(f"\ntables and figures in {out}", file=sys.stderr)
 
 

@@ -476,8 +476,9 @@ def write_report(out_dir: Path, figures: bool = True) -> dict:
         write_atomic(out_dir / f"{name}.csv", lambda tmp, frame=frame: frame.to_csv(tmp, index=False))
     engine = engine_of(data)
     engine_line = f"Physics: {engine['name']} {engine['version'] or ''}".rstrip()
+    budget = budget_note(data)
     md = ["# " + data["config"]["name"], "", engine_line + " (docs/physics.md).", "",
-          display_table(s).to_markdown(index=False), ""]
+          *([f"**{budget}**", ""] if budget else []), display_table(s).to_markdown(index=False), ""]
     if not comp.empty:
         shown = comp.copy()
         shown["difference [95% CI]"] = [f"{d:+.3f} [{lo:+.3f}, {hi:+.3f}]"
@@ -507,6 +508,7 @@ def write_report(out_dir: Path, figures: bool = True) -> dict:
                           f"{engine_line}. Ranked by success on posterior samples (Wilson 95 % intervals); "
                           "'vs best': the paired difference on the same posterior trials (bootstrap 95 % "
                           "interval, pairs resampled within each plan) and McNemar's exact p.", "",
+                          *([f"**{budget}**", ""] if budget else []),
                           leaderboard_table(board).to_markdown(index=False), ""]))
     write_text(out_dir / "leaderboard.tex", _leaderboard_latex(board))
     for table in ("trials", "plans"):
@@ -520,7 +522,22 @@ def write_report(out_dir: Path, figures: bool = True) -> dict:
     write_text(out_dir / "manifest.json", json.dumps(manifest, indent=2, default=str) + "\n")
     if figures:
         _figures(out_dir, data, s, bins, fails, regime_bins, board)
-    return {"summary": s, "comparisons": comp, "calibration": cal, "leaderboard": board}
+    return {"summary": s, "comparisons": comp, "calibration": cal, "leaderboard": board, "budget_note": budget}
+
+
+def budget_note(data: dict) -> str | None:
+    """A line for the report when plans stopped at their time budget (status 'budget'):
+    such a plan's grasp depends on how fast the machine ran it, so its rows may differ
+    with other workers or on another machine (docs/experiments.md, "Reproducible across
+    machines"); None when no plan did."""
+    plans = data["plans"]
+    stopped = plans[plans.status == "budget"]
+    if stopped.empty:
+        return None
+    counts = ", ".join(f"{p} {n}" for p, n in stopped.planner.value_counts().sort_index().items())
+    return (f"{len(stopped)} of {len(plans)} plans stopped at their time budget ({counts}): their grasps "
+            "depend on this machine's speed and load, so their rows may differ with other workers or on "
+            "another machine; a larger time_budget_s removes that for planners that finish on their own.")
 
 
 def _leaderboard_latex(board: pd.DataFrame) -> str:

@@ -10,8 +10,8 @@ import pytest
 from scipy import stats
 
 from harness.ledger import FILENAME, Ledger
-from harness.report import (calibration, comparison_pairs, comparisons, leaderboard, leaderboard_table, load,
-                            reasons, summary)
+from harness.report import (budget_note, calibration, comparison_pairs, comparisons, leaderboard, leaderboard_table,
+                            load, reasons, summary)
 
 SCENES = ("alpha", "beta")
 PLANNERS = ("mean-shape", "gp-p")
@@ -134,6 +134,18 @@ def test_the_leaderboard_ranks_by_posterior_success_with_wilson_intervals_and_pa
     assert second.difference_ci_low < second.difference_vs_best < second.difference_ci_high
     table = leaderboard_table(board)
     assert table["vs best (paired)"].iloc[0] == "best" and table["McNemar p"].iloc[0] == "–"
+
+
+def test_plans_stopped_at_their_budget_are_counted_per_planner_in_a_note(run):
+    """No note when every plan finished on its own; with some 'budget' plans, the note
+    counts them (of all plans) per planner, since their grasps depend on the machine."""
+    assert budget_note(run) is None
+    plans = run["plans"].copy()
+    plans.loc[plans.index[[0, 2, 3]], "status"] = "budget"
+    stopped = plans.loc[plans.index[[0, 2, 3]], "planner"].value_counts()
+    note = budget_note({**run, "plans": plans})
+    assert note.startswith(f"3 of {len(plans)} plans stopped at their time budget (")
+    assert ", ".join(f"{p} {n}" for p, n in stopped.sort_index().items()) in note
 
 
 def test_lift_variants_are_compared_with_their_own_baseline_and_with_the_paper_quality():
