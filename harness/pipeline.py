@@ -159,15 +159,26 @@ def planned_grasp(row: dict) -> np.ndarray:
     return np.array([[row["g1x"], row["g1y"]], [row["g2x"], row["g2y"]]], dtype=float)
 
 
+def verdict_label(reason: int, turned: bool) -> str:
+    """A draw's analytic verdict as the ledger stores it: ``lifted`` (the plates hold it
+    level), ``lifted_turned`` (the weight turned it in the plates and it is still lifted:
+    docs/lift.md, such draws fail far more often in the physics) or the first reason it
+    fails P_L (harness.quality.FAILURE_REASONS)."""
+    from harness.quality import FAILURE_REASONS
+
+    if reason >= 0:
+        return FAILURE_REASONS[reason]
+    return "lifted_turned" if turned else "lifted"
+
+
 def analytic_row(cell: Cell, row: dict, draws: int, reasons: int) -> dict:
     """The ledger's analytic row of an executed plan: P_F, P_L, their intervals and the
     failures over the first ``draws`` draws, and the verdicts of the first ``reasons``
-    draws (those the posterior trials share)."""
-    from harness.quality import FAILURE_REASONS
-
+    draws (those the posterior trials share; :func:`verdict_label`)."""
     outcomes = judge(cell, planned_grasp(row), draws)
     est = outcomes.estimates[0]
-    verdicts = ",".join("lifted" if r < 0 else FAILURE_REASONS[r] for r in outcomes.reason[0, :reasons])
+    verdicts = ",".join(verdict_label(r, turned)
+                        for r, turned in zip(outcomes.reason[0, :reasons], outcomes.pivots[0, :reasons]))
     return {"scene": cell.scene.name, "realisation": cell.realisation, "planner": row["planner"],
             "draws": est.samples, "p_f": est.p_f, "ci_low": est.ci_low, "ci_high": est.ci_high,
             "ferrari_canny_mean": est.ferrari_canny_mean, "failures": json.dumps(est.failures, sort_keys=True),

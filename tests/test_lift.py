@@ -181,3 +181,22 @@ def test_the_smooth_lift_is_the_average_of_the_draws_verdicts():
                     rng.random((n, 2)), settings)
     smooth = smooth_lift(mean_d, sd, weight, settings.friction, 0.0, 0.0, 1.0, 1e-6, settings)
     assert smooth == pytest.approx(verdict.lifted.mean(), abs=0.01)
+
+
+def test_the_ledger_labels_a_lifted_draw_the_weight_turned_apart():
+    """analytic_row's per-draw verdicts against evaluate_draws on the same draws: the
+    rectangle gripped across its long sides 2 cm from its centre at 3000 kg/m^3 and 8 N
+    (the weight turns some draws, which still hang clear): 'lifted_turned' exactly where
+    a draw is lifted and turned, 'lifted' where it is lifted level."""
+    from harness import pipeline
+
+    scene = load_scene("rectangle")
+    settings = resolve(scene, {"density": 3000.0, "force": 8.0})
+    cell = pipeline.open_cell(scene, settings, 0, 0, 200)
+    row = {"planner": "x", "g1x": 0.02, "g1y": -0.04, "g2x": 0.02, "g2y": 0.04}
+    labels = np.array(pipeline.analytic_row(cell, row, 200, 200)["reasons"].split(","))
+    out = pipeline.judge(cell, pipeline.planned_grasp(row), 200)
+    lifted, turned = out.lifted[0], out.pivots[0]
+    assert 0 < (lifted & turned).sum() < lifted.sum()
+    assert ((labels == "lifted_turned") == (lifted & turned)).all()
+    assert ((labels == "lifted") == (lifted & ~turned)).all()

@@ -103,6 +103,36 @@ def test_the_verdicts_of_the_draws_meet_their_trials_outcomes(run):
     assert list(table.planner.unique()) == ["all", *PLANNERS]
 
 
+def test_lifted_draws_the_weight_turned_get_their_own_row_before_the_failures(run):
+    """Draw 1 of every plan relabelled 'lifted_turned' (harness.pipeline.verdict_label):
+    its trials leave the 'lifted' row for a row of their own, between 'lifted' and the
+    failure reasons; nothing else moves."""
+    before = reasons(run)
+    data = dict(run)
+    data["analytic"] = run["analytic"].assign(
+        reasons=[",".join("lifted_turned" if i == 1 else v for i, v in enumerate(r.split(",")))
+                 for r in run["analytic"].reasons])
+    table = reasons(data)
+    overall = table[table.planner == "all"].drop(columns="planner").set_index("analytic")
+    was = before[before.planner == "all"].drop(columns="planner").set_index("analytic")
+    post = run["trials"][run["trials"].shapes == "posterior"]
+    draw1 = post[post.trial == 1].outcome.value_counts()
+    assert list(overall.index) == ["lifted", "lifted_turned", "friction_cone", "weight_torque"]
+    for outcome, n in draw1.items():
+        assert overall.loc["lifted_turned", outcome] == n
+        assert overall.loc["lifted", outcome] == was.loc["lifted", outcome] - n
+    assert (overall.loc["weight_torque"] == was.loc["weight_torque"]).all()
+
+
+def test_a_drawn_verdict_is_labelled_by_its_reason_and_whether_the_weight_turned_it():
+    from harness.pipeline import verdict_label
+    from harness.quality import FAILURE_REASONS
+
+    assert verdict_label(-1, False) == "lifted" and verdict_label(-1, True) == "lifted_turned"
+    for k, name in enumerate(FAILURE_REASONS):
+        assert verdict_label(k, True) == name == verdict_label(k, False)
+
+
 def test_the_leaderboard_ranks_by_posterior_success_with_wilson_intervals_and_paired_differences(run):
     """Against direct computations: the order by pooled posterior success, the Wilson
     interval from its closed form, the difference against the best as the mean of the
