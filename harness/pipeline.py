@@ -162,8 +162,9 @@ def planned_grasp(row: dict) -> np.ndarray:
 def verdict_label(reason: int, turned: bool) -> str:
     """A draw's analytic verdict as the ledger stores it: ``lifted`` (the plates hold it
     level), ``lifted_turned`` (the weight turned it in the plates and it is still lifted:
-    docs/lift.md, such draws fail far more often in the physics) or the first reason it
-    fails P_L (harness.quality.FAILURE_REASONS)."""
+    over the regime sweep such draws failed up to four times in five where nothing
+    stopped the turn, docs/lift.md) or the first reason it fails P_L
+    (harness.quality.FAILURE_REASONS)."""
     from harness.quality import FAILURE_REASONS
 
     if reason >= 0:
