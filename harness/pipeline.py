@@ -165,11 +165,11 @@ def verdict_label(reason: int, turned: bool) -> str:
     over the regime sweep such draws failed up to four times in five where nothing
     stopped the turn, docs/lift.md) or the first reason it fails P_L
     (harness.quality.FAILURE_REASONS)."""
-    from harness.quality import FAILURE_REASONS
+    from harness.quality import FAILURE_REASONS, LIFTED_VERDICTS
 
     if reason >= 0:
         return FAILURE_REASONS[reason]
-    return "lifted_turned" if turned else "lifted"
+    return LIFTED_VERDICTS[int(bool(turned))]
 
 
 def analytic_row(cell: Cell, row: dict, draws: int, reasons: int) -> dict:

@@ -22,6 +22,9 @@ from harness.squeeze import squeeze
 #: planar ones (P_F), then the lift's for draws in force closure (P_L).
 PLANAR_REASONS = ("too_wide", "missed", "degenerate_normal", "friction_cone")
 FAILURE_REASONS = PLANAR_REASONS + LIFT_REASONS
+#: The verdicts of a lifted draw as the ledger stores them: held level, or turned by the
+#: weight and still lifted (harness.pipeline.verdict_label).
+LIFTED_VERDICTS = ("lifted", "lifted_turned")
 #: Fields of samples in several pieces whose bodies (harness.grasp.body_fields) are
 #: built at once while judging the lift: bounds the memory that costs (about 70 M^2 bytes
 #: per field) whatever the share of such samples.

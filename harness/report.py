@@ -369,7 +369,7 @@ def reasons(data: dict) -> pd.DataFrame:
     """The analytic verdict of each posterior trial's draw ('lifted', 'lifted_turned' or
     the first failure reason: harness.pipeline.verdict_label) against the trial's
     physical outcome: counts per planner and for 'all'."""
-    from harness.quality import FAILURE_REASONS
+    from harness.quality import FAILURE_REASONS, LIFTED_VERDICTS
 
     analytic = data["analytic"].dropna(subset=["reasons"])
     post = data["trials"][data["trials"].shapes == "posterior"]
@@ -380,7 +380,7 @@ def reasons(data: dict) -> pd.DataFrame:
     paired = post[keys + ["outcome"]].merge(verdicts, on=keys)
     if paired.empty:
         return pd.DataFrame()
-    order = ["lifted", "lifted_turned", *FAILURE_REASONS]
+    order = [*LIFTED_VERDICTS, *FAILURE_REASONS]
     tables = []
     for planner, g in [(ALL, paired)] + list(paired.groupby("planner", sort=False)):
         t = pd.crosstab(g.analytic, g.outcome).reindex([v for v in order if v in set(g.analytic)])
