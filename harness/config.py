@@ -173,10 +173,12 @@ def parse_config(data: dict, source: str, base_dir: Path, default_name: str = "e
         protocol["solver_iterations"] = phys.integer("solver_iterations", None, lo=1, hi=10_000)
     if "time_step" in protocol and protocol["time_step"] > 0.01:
         raise phys.error("time_step", f"{protocol['time_step']} s is too coarse (at most 0.01 s)")
-    for key in ("cone_friction", "table_hull"):
+    for key in ("cone_friction", "table_hull", "convex_clipping"):
         if key in phys.data:
             protocol[key] = phys.boolean(key)
     engine = phys.string("engine", ENGINES[0], choices=ENGINES)
+    if protocol.get("convex_clipping") and engine != "pybullet":
+        raise phys.error("convex_clipping", f"Bullet's alone; the engine is '{engine}'")
     if engine != ENGINES[0]:  # the default engine is left out, so configs written before engines keep their hash
         protocol["engine"] = engine
     batch = phys.integer("batch_size", 16, lo=1, hi=64)

@@ -12,8 +12,8 @@ class Protocol:
     """Every constant of a trial (SI units). ``engine`` names the simulator
     (harness.physics.trial.ENGINES); the time step and solver iterations are the
     engine's own, chosen by its fidelity study in docs/physics.md (make one with
-    :meth:`of`). ``friction_anchor`` is Bullet's alone; ``cone_friction`` chooses the
-    elliptic cone over the pyramid in MuJoCo too."""
+    :meth:`of`). ``friction_anchor`` and ``convex_clipping`` are Bullet's alone;
+    ``cone_friction`` chooses the elliptic cone over the pyramid in MuJoCo too."""
 
     engine: str = "pybullet"
     time_step: float = 1.0 / 480.0
@@ -29,6 +29,7 @@ class Protocol:
     friction_anchor: bool = True     # Bullet's friction anchors: static friction without creep
     cone_friction: bool = True       # the exact Coulomb cone; False: Bullet's pyramid (faster, anisotropic)
     table_hull: bool = True          # the object meets the table through its convex hull's foot, not its pieces
+    convex_clipping: bool = False    # Bullet: contacts by clipping the convex pieces' faces (SAT), not GJK's points
     check_interval: float = 1.0 / 60.0  # s between contact checks while lifting and shaking
     held_distance: float = 0.001     # m: a jaw this close to the object touches it
     lost_distance: float = 0.005     # m: an object this far from both jaws ...

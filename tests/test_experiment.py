@@ -276,6 +276,8 @@ BAD_CONFIGS = [
     ('[physics]\ntime_step = 0.5\n[[planners]]\nname = "gp-p"', "physics.time_step"),
     ('[physics]\ncone_friction = 0\n[[planners]]\nname = "gp-p"', "physics.cone_friction"),
     ('[physics]\ntable_hull = "yes"\n[[planners]]\nname = "gp-p"', "physics.table_hull"),
+    ('[physics]\nconvex_clipping = 1\n[[planners]]\nname = "gp-p"', "physics.convex_clipping"),
+    ('[physics]\nengine = "mujoco"\nconvex_clipping = true\n[[planners]]\nname = "gp-p"', "physics.convex_clipping"),
     ('colour = "red"\n[[planners]]\nname = "gp-p"', "colour"),
     ('[[planners]]\nname = "gp-p"\n[[planners]]\nname = "gp-p"', "planners[1].label"),
     ('[gripper]\nopening = 0\n[[planners]]\nname = "gp-p"', "gripper.opening"),
@@ -405,6 +407,9 @@ def test_physics_overrides_reach_the_protocol(tmp_path):
     flipped = str(not Protocol().table_hull).lower()
     path = _write(tmp_path, head + f'[physics]\ntable_hull = {flipped}\n[[planners]]\nname = "gp-p"', "foot.toml")
     assert load_config(path).protocol().table_hull is not Protocol().table_hull
+    flipped = str(not Protocol().convex_clipping).lower()
+    path = _write(tmp_path, head + f'[physics]\nconvex_clipping = {flipped}\n[[planners]]\nname = "gp-p"', "sat.toml")
+    assert load_config(path).protocol().convex_clipping is not Protocol().convex_clipping
 
 
 def test_compare_pairs_two_runs_that_differ_in_physics_only(tiny_run, tmp_path, capsys):

@@ -137,6 +137,31 @@ def test_a_turning_object_is_lifted_only_if_it_hangs_clear_of_the_table():
     assert verdict.reason.tolist() == [-1, 1]
 
 
+@pytest.mark.parametrize("gap, lifted", [(0.0125, 1.0), (-0.0125, 0.0)])
+def test_a_hang_bar_is_lifted_exactly_while_its_far_end_clears_the_table(gap, lifted):
+    """bench lift's hang bar (400 g, 10 N), gripped 12 mm from its end, whose weight turns it
+    at every length: the model's reach is the closed form length - 12 mm, so P_L is 1 where
+    the hang clears the lifted table by 1.25 cm and 0 where it reaches 1.25 cm into it (the
+    grid's 5 mm cells and 1 mm of approach noise move the reach by less than that)."""
+    from harness.bench.lift_study import SIGMA_G, HangBar
+
+    hang = HangBar(0.4, 0.5, 10.0)
+    probe = resolve(hang.bar(0.12).scene(), {"sigma_g": SIGMA_G})
+    length = probe.lift_height + axis_height(probe) + hang.short - gap
+    bar = hang.bar(length)
+    scene = bar.scene()
+    settings = resolve(scene, {"sigma_g": SIGMA_G})
+    n = 200
+    approach = np.random.default_rng(1).standard_normal((n, 2, 2))
+    truth = SDFBatch(scene.grid, np.repeat(scene.true_sdf[None], n, axis=0),
+                     np.repeat(scene.true_sdf_gradient[None], n, axis=0))
+    draws = EvaluationDraws(truth, approach, np.zeros(n), np.random.default_rng(2).random((n, 2)), 1.0)
+    result = evaluate_draws(bar.grasp(hang.offset(length)), draws, settings)
+    assert bar.mass == pytest.approx(0.4)
+    assert result.pivots.mean() == 1.0
+    assert result.lifted.mean() == lifted
+
+
 def test_a_lifted_draw_is_in_force_closure_or_squeezed_into_it_and_the_reasons_partition_the_draws():
     scene = load_scene("stapler")
     from harness.belief import build_belief

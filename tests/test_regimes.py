@@ -130,3 +130,42 @@ def test_outputs_and_the_command_line(sweep, tmp_path):
     bad = subprocess.run([sys.executable, "-m", "harness", "bench", "regimes", "--engines", "bullet",
                           "--out", str(tmp_path / "x")], capture_output=True, text=True)
     assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1 and "--engines" in bad.stderr
+
+
+def _posterior(rates: np.ndarray, n: int, rng) -> pd.DataFrame:
+    """Posterior trials of len(rates) plans, n each, success drawn at each plan's rate."""
+    wins = rng.random((len(rates), n)) < rates[:, None]
+    return pd.DataFrame({"scene": np.repeat([f"s{k}" for k in range(len(rates))], n), "realisation": 0,
+                         "planner": "p", "outcome": np.where(wins.ravel(), "success", "slipped")})
+
+
+def test_the_brier_floor_is_the_expected_score_of_the_true_rates():
+    """Simulated: plans with known success rates, 24 trials each; the floor estimated from
+    the trials averages, over 400 repetitions, to the expected Brier score of the true
+    rates, mean p (1 - p) (within 0.002; the plug-in s (1 - s) is low by a factor 23/24)."""
+    rng = np.random.default_rng(5)
+    rates = rng.uniform(0.3, 1.0, 60)
+    floors = [rs.brier_floor(_posterior(rates, 24, rng)) for _ in range(400)]
+    assert np.mean(floors) == pytest.approx(np.mean(rates * (1 - rates)), abs=0.002)
+    assert rs.brier_floor(_posterior(np.array([1.0, 0.0]), 24, rng)) == 0.0
+
+
+def test_the_engine_yardstick_scores_one_run_by_the_others_rates_at_the_same_grasps():
+    """The same trials in both runs: Spearman 1 and the Brier score of each plan's own rate,
+    mean s (1 - s) over trials (closed form); a plan executed at another grasp in the other
+    run is left out."""
+    rng = np.random.default_rng(6)
+    post = _posterior(np.linspace(0.2, 1.0, 12), 20, rng)
+    plans = pd.DataFrame({"scene": [f"s{k}" for k in range(12)], "realisation": 0, "planner": "p",
+                          "g1x": 0.0, "g1y": 0.0, "g2x": 0.05, "g2y": 0.0})
+    s = (post.outcome == "success").groupby(post.scene).mean()
+    got = rs.engine_yardstick(post, post, plans, plans)
+    assert got["engine_spearman"] == pytest.approx(1.0)
+    assert got["engine_brier"] == pytest.approx(float((s * (1 - s)).mean()), abs=1e-12)
+    moved = plans.assign(g1x=np.where(plans.scene == "s0", 0.01, 0.0))
+    rest = post[post.scene != "s0"]
+    s_rest = s.drop("s0")
+    assert rs.engine_yardstick(post, post, plans, moved)["engine_brier"] == pytest.approx(
+        float((s_rest * (1 - s_rest)).mean()), abs=1e-12)
+    assert rs.engine_yardstick(rest, rest, plans, plans)["engine_brier"] == pytest.approx(
+        float((s_rest * (1 - s_rest)).mean()), abs=1e-12)

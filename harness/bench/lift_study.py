@@ -1,7 +1,8 @@
 """The lift model against the physics (``gpis-harness bench lift``): bars gripped across
 their width at growing offsets from their centre of mass, where the analytic P_L and the
-simulated success fall through 0.5; and the friction levers Bullet's contact manifolds
-give the jaw plates on the library's trial set.
+simulated success fall through 0.5; hang bars, which the weight turns in the plates, at
+growing lengths, where success falls as their hang nears the lifted table; and the
+friction levers Bullet's contact manifolds give the jaw plates on the library's trial set.
 
 A bar is a fully observed rectangle (its true shape: no shape uncertainty), so the
 offset is the only thing that changes along a sweep. Trials and the analytic estimate
@@ -20,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from harness.grasp import SDFBatch
+from harness.lift import axis_height
 from harness.physics.simulate import make_trials, truth_polygon
 from harness.physics.engines import make_runner
 from harness.protocol import Protocol
@@ -93,18 +95,23 @@ BARS = (
 )
 
 
+def _exact_draws(scene: Scene, n: int, seed: int, *keys):
+    """The scene's settings at the sweeps' approach noise, and n draws of its true shape
+    with approach and pressure deviates from the stream (seed, "lift-bench", *keys)."""
+    settings = resolve(scene, {"sigma_g": SIGMA_G})
+    approach = stream(seed, "lift-bench", *keys, "approach").standard_normal((n, 2, 2))
+    pressure = stream(seed, "lift-bench", *keys, "pressure").random((n, 2))
+    truth = SDFBatch(scene.grid, np.repeat(scene.true_sdf[None], n, axis=0),
+                     np.repeat(scene.true_sdf_gradient[None], n, axis=0))
+    return settings, approach, EvaluationDraws(truth, approach, np.zeros(n), pressure, 1.0)
+
+
 def sweep(bar: Bar, trials: int = 12, seed: int = 0, runner=None) -> list[dict]:
     """Per offset: simulated success, the fraction of trials that turned (pivot above
     TURNED), the outcomes and the angles of the turned trials that ended held; the
     analytic P_L and the analytic fraction of draws that turn."""
     scene = bar.scene()
-    settings = resolve(scene, {"sigma_g": SIGMA_G})
-    n = max(trials, ANALYTIC_DRAWS)
-    approach = stream(seed, "lift-bench", bar.label, "approach").standard_normal((n, 2, 2))
-    pressure = stream(seed, "lift-bench", bar.label, "pressure").random((n, 2))
-    truth = SDFBatch(scene.grid, np.repeat(scene.true_sdf[None], n, axis=0),
-                     np.repeat(scene.true_sdf_gradient[None], n, axis=0))
-    draws = EvaluationDraws(truth, approach, np.zeros(n), pressure, 1.0)
+    settings, approach, draws = _exact_draws(scene, max(trials, ANALYTIC_DRAWS), seed, bar.label)
     offsets = bar.offsets()
     polygon = truth_polygon(scene)
     batch = [t for d in offsets for t in make_trials(settings, bar.grasp(d), [polygon], approach[:trials])]
@@ -125,6 +132,115 @@ def sweep(bar: Bar, trials: int = 12, seed: int = 0, runner=None) -> list[dict]:
                      "outcomes": dict(Counter(r.outcome for r in mine)),
                      "held_turns": [float(r.pivot) for r in mine if r.outcome == "success" and r.pivot > TURNED]})
     return rows
+
+
+@dataclass(frozen=True)
+class HangBar:
+    """Bars of one mass that the weight turns in the plates, gripped across their width
+    ``short`` from one end: the far end reaches length - short beyond the grasp axis, so
+    the longer the bar (its density falling to keep the mass), the nearer its hang comes
+    to the lifted table, until it reaches it. The lift model calls a turned bar lifted
+    when that reach is less than the clearance, the lift height plus the grasp axis's
+    height above the table (harness.lift, "Turning and hanging")."""
+
+    mass: float
+    friction: float
+    force: float
+    short: float = 0.012
+    width: float = 0.03
+    thickness: float = 0.03
+
+    @property
+    def label(self) -> str:
+        return (f"{self.mass * 1e3:g} g, {self.width * 100:g} x {self.thickness * 100:g} cm, gripped "
+                f"{self.short * 1e3:g} mm from its end, mu {self.friction:g}, {self.force:g} N")
+
+    def bar(self, length: float) -> Bar:
+        return Bar(length, self.mass / (length * self.width * self.thickness), self.friction, self.force,
+                   self.width, self.thickness)
+
+    def offset(self, length: float) -> float:
+        return 0.5 * length - self.short
+
+
+#: The hang bars' lengths (m): from a hang about 7 cm clear of the lifted table to 5 cm into it.
+HANG_LENGTHS = tuple(np.round(np.arange(0.06, 0.1751, 0.005), 3))
+#: A heavy and a light bar, both turned by their weight from 12 cm on (where they hang near the table).
+HANG_BARS = (HangBar(0.4, 0.5, 10.0), HangBar(0.1, 0.5, 3.0))
+#: A turned bar held at a smaller angle than this (rad) has come to rest short of the hang.
+AT_REST = 1.4
+#: Hang bars whose hang the model calls at least this clear of the lifted table (m) should all be held.
+CLEAR_GAP = 0.02
+#: The hang bars run again in Bullet at a time step this many times finer (docs/lift.md,
+#: "Hang bars": the default step drops heavy swinging bars that a finer one holds).
+HANG_FINER = 4
+
+
+def hang_sweep(hang: HangBar, trials: int = 12, seed: int = 0, runner=None) -> list[dict]:
+    """Per length: the model's gap between the hanging bar and the lifted table
+    (clearance - reach, m), simulated success, the share of trials that turned, the
+    outcomes, and for the turned trials that ended held the median angle and, of those
+    that came to rest short of the hang (below AT_REST), the median slide down the
+    plates (m: the lift height less the centre of mass's rise and its fall d sin(angle)
+    from the turn; a bar still swinging has no such angle); the analytic P_L and the
+    share of draws that turn."""
+    rows = []
+    own = runner is None
+    runner = runner or make_runner()
+    try:
+        for length in HANG_LENGTHS:
+            bar, d = hang.bar(float(length)), hang.offset(float(length))
+            scene = bar.scene()
+            settings, approach, draws = _exact_draws(scene, max(trials, ANALYTIC_DRAWS), seed, "hang", hang.label,
+                                                     int(round(length * 1e3)))
+            grasp = bar.grasp(d)
+            results = runner.run(make_trials(settings, grasp, [truth_polygon(scene)], approach[:trials]))
+            analytic = evaluate_draws(grasp, draws, settings)
+            held = [r for r in results if r.outcome == "success" and r.pivot > TURNED]
+            slides = [settings.lift_height - r.rise - d * math.sin(r.pivot) for r in held if r.pivot < AT_REST]
+            rows.append({"length": float(length), "offset": d,
+                         "gap": settings.lift_height + axis_height(settings) - (float(length) - hang.short),
+                         "success": float(np.mean([r.outcome == "success" for r in results])),
+                         "turned": float(np.mean([r.pivot > TURNED for r in results])),
+                         "p_l": float(analytic.lifted.mean()), "turns": float(analytic.pivots.mean()),
+                         "outcomes": dict(Counter(r.outcome for r in results)),
+                         "held_turn_median": float(np.median([r.pivot for r in held])) if held else None,
+                         "slide_median": float(np.median(slides)) if slides else None})
+    finally:
+        if own:
+            runner.close()
+    return rows
+
+
+def hang_validate(bars=HANG_BARS, trials: int = 12, seed: int = 0, engine: str = "pybullet",
+                  finer: int = 1) -> dict:
+    """Every hang bar's sweep and the gaps (m) at which simulated success and P_L fall
+    through 0.5 as the bar lengthens; their difference (success's less P_L's: positive
+    when the physics needs more room than the model gives); the success of the bars
+    whose hang the model calls at least CLEAR_GAP clear, and their failures. ``finer``:
+    the engine's time step divided by this (a convergence check)."""
+    rows = []
+    protocol = Protocol.of(engine)
+    protocol = protocol.finer(finer) if finer > 1 else protocol
+    with make_runner(protocol) as runner:
+        for hang in bars:
+            points = hang_sweep(hang, trials, seed, runner)
+            x = [p["length"] for p in points]
+
+            def gap_at(values):
+                at = crossing(x, values)
+                return None if at is None else (points[0]["gap"] + points[0]["length"] - at)
+
+            sim, model = gap_at([p["success"] for p in points]), gap_at([p["p_l"] for p in points])
+            clear = [p for p in points if p["gap"] >= CLEAR_GAP]
+            failed = Counter()
+            for p in clear:
+                failed.update({k: v for k, v in p["outcomes"].items() if k != "success"})
+            rows.append({"bar": hang.label, "success_gap": sim, "p_l_gap": model,
+                         "difference": None if sim is None or model is None else sim - model,
+                         "clear_success": float(np.mean([p["success"] for p in clear])) if clear else None,
+                         "clear_failures": dict(failed), "points": points})
+    return {"engine": engine, "time_step": protocol.time_step, "trials_per_length": trials, "rows": rows}
 
 
 def crossing(offsets, values) -> float | None:
@@ -236,12 +352,18 @@ def benchmark(settings: Settings = Settings()) -> dict:
     levers of Bullet's contact manifolds on the library trial set; the bar sweeps again
     in MuJoCo."""
     return {**validate(trials=settings.trials, seed=settings.seed),
+            "hang": hang_validate(trials=settings.trials, seed=settings.seed),
+            "hang_fine": hang_validate(trials=settings.trials, seed=settings.seed, finer=HANG_FINER),
             "manifold_levers": manifold_levers(seed=settings.seed),
-            "mujoco": validate(trials=settings.trials, seed=settings.seed, engine="mujoco")}
+            "mujoco": {**validate(trials=settings.trials, seed=settings.seed, engine="mujoco"),
+                       "hang": hang_validate(trials=settings.trials, seed=settings.seed, engine="mujoco")}}
 
 
 def format_lines(res: dict) -> list[str]:
     lines = _bar_lines(res)
+    for key in ("hang", "hang_fine"):
+        if key in res:
+            lines += _hang_lines(res[key])
     m = res["manifold_levers"]
     q = m["quartiles"]
     lines.append(f"Bullet's manifold levers on {m['plates']} plates of the library trial set, as fractions of the "
@@ -249,6 +371,8 @@ def format_lines(res: dict) -> list[str]:
                  f"0.75), {m['single_point']:.0%} held by one point, {m['beyond_largest']:.1%} beyond the largest")
     if "mujoco" in res:
         lines += ["", "the same bars in MuJoCo:", *_bar_lines(res["mujoco"])]
+        if "hang" in res["mujoco"]:
+            lines += _hang_lines(res["mujoco"]["hang"])
     return lines
 
 
@@ -276,4 +400,22 @@ def _bar_lines(res: dict) -> list[str]:
     lines.append(f"largest relative error: P_L vs success {err(largest)}, the model's turning vs the "
                  f"simulation's {err(res['largest_turning_error'])}"
                  + (f"; {res['missing']} rows without a crossing on one side" if res["missing"] else ""))
+    return lines
+
+
+def _hang_lines(res: dict) -> list[str]:
+    def cm(v):
+        return "never" if v is None else f"{v * 100:+.1f}"
+
+    lines = [f"hang bars ({res['engine']}, step {res['time_step'] * 1e3:.3g} ms): bars the weight turns, "
+             f"{len(HANG_LENGTHS)} lengths, "
+             f"{res['trials_per_length']} trials each; the gap (cm) between the model's hang and the lifted "
+             f"table where success and P_L fall through 0.5, and the success of bars hanging "
+             f"{CLEAR_GAP * 100:g} cm clear or more",
+             f"{'bar':<58} {'P_L':>6} {'success':>8} {'diff':>6}  {'clear':>5}  failures"]
+    for r in res["rows"]:
+        clear = "-" if r["clear_success"] is None else f"{r['clear_success']:.2f}"
+        fails = ", ".join(f"{k} {v}" for k, v in sorted(r["clear_failures"].items())) or "none"
+        lines.append(f"{r['bar']:<58} {cm(r['p_l_gap']):>6} {cm(r['success_gap']):>8} {cm(r['difference']):>6}"
+                     f"  {clear:>5}  {fails}")
     return lines

@@ -29,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from scipy import stats
 
 from harness.bench.common import jsonable
 from harness.bench.regime_objects import objects as regime_objects
@@ -190,17 +191,21 @@ def run(out: Path = Path("results/regimes"), engines=("pybullet",), workers: int
 
 def study(out: Path, engines=("pybullet",), regimes=REGIMES, objects=None) -> dict:
     """Per engine, regime and part (design, held_out, all): the calibration of P_F and
-    P_L, each planner's success and the lift planners' paired differences; and the
-    differences pooled over the sweep."""
-    from harness.report import load
+    P_L, each planner's success and the lift planners' paired differences; two
+    yardsticks for P_L, the Brier score's floor (:func:`brier_floor`) and, with two
+    engines, the other engine's success per plan as the estimate
+    (:func:`engine_yardstick`); and the differences pooled over the sweep."""
+    from harness.report import load, restricted
 
     objects = objects or regime_objects()
     held = {o.name for o in objects if o.held_out}
     rows, pooled = [], {}
+    loaded = {(engine, regime.name): load(Path(out) / engine / regime.name)
+              for engine in engines for regime in regimes}
     for engine in engines:
         runs = {}
         for regime in regimes:
-            data = load(Path(out) / engine / regime.name)
+            data = loaded[engine, regime.name]
             runs[regime.name] = data
             names = sorted(data["plans"].scene.unique())
             parts = {"all": names}
@@ -212,9 +217,15 @@ def study(out: Path, engines=("pybullet",), regimes=REGIMES, objects=None) -> di
             for part, scenes in parts.items():
                 if not scenes:
                     continue
-                rows.append({"engine": engine, "regime": regime.name, "part": part,
-                             "regime_held_out": regime.held_out, **_regime_row(data, scenes),
-                             **{k: v for k, v in asdict(regime).items() if k not in ("name", "held_out")}})
+                row = {"engine": engine, "regime": regime.name, "part": part, "regime_held_out": regime.held_out,
+                       **_regime_row(data, scenes)}
+                others = [e for e in engines if e != engine]
+                if others:  # the first other engine's physics as the estimate
+                    mine, theirs = (restricted(loaded[e, regime.name], scenes) for e in (engine, others[0]))
+                    row.update(engine_yardstick(mine["trials"][mine["trials"].shapes == "posterior"],
+                                                theirs["trials"][theirs["trials"].shapes == "posterior"],
+                                                mine["plans"], theirs["plans"]))
+                rows.append({**row, **{k: v for k, v in asdict(regime).items() if k not in ("name", "held_out")}})
         pooled[engine] = _pooled(runs, regimes, held)
     return {"rows": rows, "pooled": pooled, "regimes": [asdict(r) for r in regimes],
             "objects": {"design": sorted(o.name for o in objects if not o.held_out), "held_out": sorted(held)},
@@ -237,6 +248,7 @@ def _regime_row(data: dict, scenes: list[str]) -> dict:
         row.update({f"{r.metric}_spearman": r.spearman, f"{r.metric}_brier": r.brier,
                     f"{r.metric}_mean": r.mean_estimate})
     row["success_rate"] = float((post.outcome == "success").mean()) if len(post) else math.nan
+    row["brier_floor"] = brier_floor(post)
     won = part["trials"].assign(s=part["trials"].outcome == "success")
     rates = won.groupby(["shapes", "planner"], sort=False).s.mean()
     for planner in dict.fromkeys(won.planner):
@@ -249,6 +261,49 @@ def _regime_row(data: dict, scenes: list[str]) -> dict:
     row["p_l_holds"] = bool(row.get("p_l_spearman", math.nan) >= SPEARMAN_TARGET
                             and row.get("p_l_brier", math.nan) <= BRIER_TARGET)
     return row
+
+
+def _plan_rates(post: pd.DataFrame) -> pd.DataFrame:
+    """Per plan (scene, realisation, planner): its posterior trials' successes and count."""
+    return (post.assign(s=(post.outcome == "success").astype(float))
+            .groupby(["scene", "realisation", "planner"]).s.agg(["sum", "count"]))
+
+
+def brier_floor(post: pd.DataFrame) -> float:
+    """The Brier score, over these posterior trials, of the estimate that gives each plan
+    its true success rate: the least any per-plan estimate (P_L's, or any other) can
+    score in expectation. Estimated without bias from the trials, n / (n - 1) s (1 - s)
+    per plan of n trials with success rate s, weighted by n (plans of one trial give
+    no estimate and are left out)."""
+    g = _plan_rates(post)
+    g = g[g["count"] > 1]
+    if g.empty:
+        return math.nan
+    s = g["sum"] / g["count"]
+    return float((g["count"] ** 2 / (g["count"] - 1) * s * (1 - s)).sum() / g["count"].sum())
+
+
+def engine_yardstick(post: pd.DataFrame, other: pd.DataFrame, plans: pd.DataFrame,
+                     other_plans: pd.DataFrame) -> dict:
+    """The other engine's success rate of each plan as the estimate of this engine's
+    trials (Spearman over plans, Brier over trials, as P_L's): how well the physics of
+    one simulator predicts the other's, a yardstick for P_L. Only plans executed at the
+    same grasp in both runs count (the plans do not depend on the engine)."""
+    key = ["scene", "realisation", "planner"]
+    grasp = ["g1x", "g1y", "g2x", "g2y"]
+    same = plans[key + grasp].merge(other_plans[key + grasp], on=key, suffixes=("", "_o"))
+    same = same[np.isclose(same[grasp].to_numpy(), same[[g + "_o" for g in grasp]].to_numpy()).all(axis=1)]
+    mine, theirs = _plan_rates(post), _plan_rates(other)
+    g = mine.merge(theirs, left_index=True, right_index=True, suffixes=("", "_o"))
+    g = g.join(same.set_index(key)[[]], how="inner")
+    if len(g) < 3:
+        return {"engine_spearman": math.nan, "engine_brier": math.nan}
+    forecast, success = g["sum_o"] / g["count_o"], g["sum"] / g["count"]
+    brier = float(((forecast ** 2) * (g["count"] - g["sum"]) + ((1 - forecast) ** 2) * g["sum"]).sum()
+                  / g["count"].sum())
+    varied = forecast.nunique() > 1 and success.nunique() > 1
+    return {"engine_spearman": float(stats.spearmanr(forecast, success).statistic) if varied else math.nan,
+            "engine_brier": brier}
 
 
 def _difference(trials: pd.DataFrame, a: str, b: str, seed: int = 0) -> dict:
@@ -333,10 +388,11 @@ def format_lines(res: dict) -> list[str]:
     lines = []
     for engine in dict.fromkeys(r["engine"] for r in res["rows"]):
         lines.append(f"{engine}: regime, part, plans, share of plans below 0.9, P_F Spearman/Brier, "
-                     f"P_L Spearman/Brier/mean, success, gp-gpis-opt-lift and gp-p-lift - {BASELINE_LIFT}")
+                     f"P_L Spearman/Brier/mean, the Brier floor, the other engine's success as the estimate "
+                     f"(Spearman/Brier), success, gp-gpis-opt-lift and gp-p-lift - {BASELINE_LIFT}")
         lines.append(f"{'regime':<22}{'part':<10}{'plans':>6}{'<0.9':>6}{'P_F rho':>9}{'Brier':>7}"
-                     f"{'P_L rho':>9}{'Brier':>7}{'mean':>6}{'succ':>6}  {'opt-lift diff [95%]':<24}"
-                     f"{'gp-p-lift diff [95%]':<24}")
+                     f"{'P_L rho':>9}{'Brier':>7}{'mean':>6}{'floor':>7}{'eng rho':>8}{'Brier':>7}{'succ':>6}  "
+                     f"{'opt-lift diff [95%]':<24}{'gp-p-lift diff [95%]':<24}")
         for r in res["rows"]:
             if r["engine"] != engine:
                 continue
@@ -346,7 +402,9 @@ def format_lines(res: dict) -> list[str]:
             lines.append(f"{name:<22}{r['part']:<10}{r['plans']:>6}{r['share_below_0_9']:>6.2f}"
                          f"{r.get('p_f_spearman', math.nan):>9.2f}{r.get('p_f_brier', math.nan):>7.3f}"
                          f"{r.get('p_l_spearman', math.nan):>9.2f}{r.get('p_l_brier', math.nan):>7.3f}"
-                         f"{r.get('p_l_mean', math.nan):>6.2f}{r['success_rate']:>6.2f}  {diffs}")
+                         f"{r.get('p_l_mean', math.nan):>6.2f}{r.get('brier_floor', math.nan):>7.3f}"
+                         f"{r.get('engine_spearman', math.nan):>8.2f}{r.get('engine_brier', math.nan):>7.3f}"
+                         f"{r['success_rate']:>6.2f}  {diffs}")
         for part, d in res["pooled"][engine].items():
             lines.append(f"pooled over the sweep ({part}): " + "; ".join(
                 f"{p} {v['difference']:+.3f} [{v['ci_low']:+.3f}, {v['ci_high']:+.3f}]" for p, v in d.items()))

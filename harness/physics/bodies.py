@@ -162,7 +162,7 @@ OBJECT_RGBA = (0.85, 0.45, 0.15, 1.0)
 
 
 def create_body(client: int, polygon: Polygon, thickness: float, density: float, friction: float,
-                origin=(0.0, 0.0), visual: bool = False, foot: bool = False) -> Body:
+                origin=(0.0, 0.0), visual: bool = False, foot: bool = False, clipping: bool = False) -> Body:
     """The polygon extruded to a prism of ``thickness`` lying on the table (z = 0), its
     frame shifted by ``origin`` (x, y), as one rigid body: a single pybullet base whose
     collision shape is the compound of the convex pieces, with the exact mass, centre of
@@ -183,10 +183,11 @@ def create_body(client: int, polygon: Polygon, thickness: float, density: float,
     ring), so where the object touches the table does not change; only how many points
     share its weight when it lies flat (docs/physics.md, "The foot")."""
     made = recipe(polygon, thickness, density, convex_pieces)
+    flags = pb.URDF_INITIALIZE_SAT_FEATURES if clipping else 0
     mesh, foot_vertices = _bullet_meshes(polygon, thickness, density, convex_pieces)
     path = _mesh_file(mesh)
     try:
-        shape = pb.createCollisionShape(pb.GEOM_MESH, fileName=str(path), physicsClientId=client)
+        shape = pb.createCollisionShape(pb.GEOM_MESH, fileName=str(path), flags=flags, physicsClientId=client)
     finally:
         path.unlink(missing_ok=True)  # read at once; thousands of posterior samples must not pile up
     look = -1
@@ -200,7 +201,7 @@ def create_body(client: int, polygon: Polygon, thickness: float, density: float,
                                     physicsClientId=client)
     links = {}
     if foot:
-        slab = pb.createCollisionShape(pb.GEOM_MESH, vertices=foot_vertices, physicsClientId=client)
+        slab = pb.createCollisionShape(pb.GEOM_MESH, vertices=foot_vertices, flags=flags, physicsClientId=client)
         links = dict(linkMasses=[0.0], linkCollisionShapeIndices=[slab], linkVisualShapeIndices=[-1],
                      linkPositions=[[0.0, 0.0, 0.0]], linkOrientations=[[0.0, 0.0, 0.0, 1.0]],
                      linkInertialFramePositions=[[0.0, 0.0, 0.0]], linkInertialFrameOrientations=[[0.0, 0.0, 0.0, 1.0]],

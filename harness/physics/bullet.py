@@ -104,7 +104,7 @@ class _Slot(TrialMachine):
         p = self.runner.protocol
         ox, oy = self.origin
         body = create_body(c, t.polygon, t.thickness, t.density, 1.0, origin=self.origin,
-                           visual=self.camera is not None, foot=p.table_hull)
+                           visual=self.camera is not None, foot=p.table_hull, clipping=p.convex_clipping)
         self.obj, self.foot = body.body_id, body.foot
         for link in range(-1, pb.getNumJoints(self.obj, physicsClientId=c)):
             pb.changeDynamics(self.obj, link, frictionAnchor=int(p.friction_anchor), physicsClientId=c)
@@ -115,7 +115,8 @@ class _Slot(TrialMachine):
         centre = (centre[0] + ox, centre[1] + oy)
         base_z = g.depth + TABLE_GAP
         orientation = pb.getQuaternionFromEuler([0, 0, heading])
-        self.grip = pb.loadURDF(g.urdf, [centre[0], centre[1], base_z], orientation, physicsClientId=c)
+        self.grip = pb.loadURDF(g.urdf, [centre[0], centre[1], base_z], orientation, physicsClientId=c,
+                                flags=pb.URDF_INITIALIZE_SAT_FEATURES if p.convex_clipping else 0)
         for link in range(-1, pb.getNumJoints(self.grip, physicsClientId=c)):
             pb.changeDynamics(self.grip, link, lateralFriction=t.friction, frictionAnchor=int(p.friction_anchor),
                               physicsClientId=c)
