@@ -337,8 +337,9 @@ def _pooled(runs: dict, regimes, held: set) -> dict:
 
 def regime_map(rows: pd.DataFrame, path: Path) -> Path:
     """The regime map: per regime (rows), P_L's Spearman and Brier against their targets
-    and the lift planners' paired differences against mean-shape-lift, for the design
-    and held-out parts of each engine."""
+    and their yardsticks (the Brier floor; the other engine's success as the estimate,
+    when the sweep ran in both), and the lift planners' paired differences against
+    mean-shape-lift, for the design and held-out parts of each engine."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -353,12 +354,18 @@ def regime_map(rows: pd.DataFrame, path: Path) -> Path:
         for part, dy, colour in (("design", -0.18, "tab:blue"), ("held_out", 0.18, "tab:orange")):
             g = rows[(rows.engine == engine) & (rows.part == part)].set_index("regime").reindex(regimes)
             faded = np.where(g.varies.fillna(False).astype(bool), 1.0, 0.35)
-            for ax, col, target in ((axes[e, 0], "p_l_spearman", SPEARMAN_TARGET),
-                                    (axes[e, 1], "p_l_brier", BRIER_TARGET)):
+            for ax, col, target, marks in (
+                    (axes[e, 0], "p_l_spearman", SPEARMAN_TARGET, (("engine_spearman", "|", "the other engine"),)),
+                    (axes[e, 1], "p_l_brier", BRIER_TARGET, (("engine_brier", "|", "the other engine"),
+                                                             ("brier_floor", "x", "floor")))):
                 ax.barh(y + dy, g[col], height=0.34, color=colour, alpha=0.8, label=part.replace("_", " "))
                 for k, a in enumerate(faded):
                     if a < 1:
                         ax.barh(y[k] + dy, g[col].iloc[k], height=0.34, color="white", alpha=0.6)
+                for mark_col, marker, label in marks:  # the yardsticks, where the sweep has them
+                    if mark_col in g and g[mark_col].notna().any():
+                        ax.plot(g[mark_col], y + dy, marker, color="k", ms=7, mew=1.2,
+                                label=label if part == "design" else None)
                 ax.axvline(target, color="k", lw=1, ls="--")
             for planner, marker in zip(LIFT_PLANNERS, ("o", "s")):
                 d = g[f"diff:{planner}"]
@@ -376,7 +383,8 @@ def regime_map(rows: pd.DataFrame, path: Path) -> Path:
     axes[0, 0].legend(fontsize=7, loc="lower left")
     axes[0, 2].legend(fontsize=6, loc="lower left")
     fig.text(0.01, 0.005, "* held-out regime; faded bars: success does not vary (fewer than a tenth of the "
-             "plans below 0.9)", fontsize=7)
+             "plans below 0.9); |: the other engine's success per plan as the estimate; x: the Brier score's "
+             "floor", fontsize=7)
     fig.tight_layout(rect=(0, 0.02, 1, 1))
     fig.savefig(path, dpi=110)
     plt.close(fig)
