@@ -275,6 +275,18 @@ def _bootstrap_means(d: np.ndarray, groups: list[np.ndarray], rng: np.random.Gen
     return total / len(d)
 
 
+def plan_rates(post: pd.DataFrame) -> pd.DataFrame:
+    """Per plan (scene, realisation, planner): its trials' successes ("sum") and count."""
+    return (post.assign(s=(post.outcome == "success").astype(float))
+            .groupby(["scene", "realisation", "planner"]).s.agg(["sum", "count"]))
+
+
+def brier_score(forecast, wins, count) -> float:
+    """The Brier score over trials of per-plan forecasts: each plan's ``count`` trials,
+    ``wins`` of them successes, all forecast at its ``forecast``."""
+    return float(((forecast ** 2) * (count - wins) + ((1 - forecast) ** 2) * wins).sum() / count.sum())
+
+
 def calibration(data: dict) -> tuple[pd.DataFrame, pd.DataFrame]:
     """Per plan: analytic P_F and P_L against success on posterior samples. Returns the
     table per metric and planner (and 'all': Brier score over trials, each trial's
@@ -282,8 +294,7 @@ def calibration(data: dict) -> tuple[pd.DataFrame, pd.DataFrame]:
     metric."""
     plans = data["plans"][data["plans"].executed == 1]
     post = data["trials"][data["trials"].shapes == "posterior"]
-    rate = (post.assign(s=(post.outcome == "success").astype(float))
-            .groupby(["scene", "realisation", "planner"]).s.agg(["sum", "count"]).reset_index())
+    rate = plan_rates(post).reset_index()
     per_plan = plans.merge(data["analytic"], on=["scene", "realisation", "planner"]).merge(
         rate, on=["scene", "realisation", "planner"])
     rows, bins = [], []
@@ -294,8 +305,7 @@ def calibration(data: dict) -> tuple[pd.DataFrame, pd.DataFrame]:
             if g.empty:
                 continue
             forecast = g[metric]
-            brier = float((((forecast ** 2) * (g["count"] - g["sum"]) + ((1 - forecast) ** 2) * g["sum"]).sum())
-                          / g["count"].sum())
+            brier = brier_score(forecast, g["sum"], g["count"])
             success = g["sum"] / g["count"]
             varied = len(g) > 2 and forecast.nunique() > 1 and success.nunique() > 1  # else undefined
             rho = stats.spearmanr(forecast, success).statistic if varied else np.nan

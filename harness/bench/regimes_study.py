@@ -263,19 +263,15 @@ def _regime_row(data: dict, scenes: list[str]) -> dict:
     return row
 
 
-def _plan_rates(post: pd.DataFrame) -> pd.DataFrame:
-    """Per plan (scene, realisation, planner): its posterior trials' successes and count."""
-    return (post.assign(s=(post.outcome == "success").astype(float))
-            .groupby(["scene", "realisation", "planner"]).s.agg(["sum", "count"]))
-
-
 def brier_floor(post: pd.DataFrame) -> float:
     """The Brier score, over these posterior trials, of the estimate that gives each plan
     its true success rate: the least any per-plan estimate (P_L's, or any other) can
     score in expectation. Estimated without bias from the trials, n / (n - 1) s (1 - s)
     per plan of n trials with success rate s, weighted by n (plans of one trial give
     no estimate and are left out)."""
-    g = _plan_rates(post)
+    from harness.report import plan_rates
+
+    g = plan_rates(post)
     g = g[g["count"] > 1]
     if g.empty:
         return math.nan
@@ -289,21 +285,21 @@ def engine_yardstick(post: pd.DataFrame, other: pd.DataFrame, plans: pd.DataFram
     trials (Spearman over plans, Brier over trials, as P_L's): how well the physics of
     one simulator predicts the other's, a yardstick for P_L. Only plans executed at the
     same grasp in both runs count (the plans do not depend on the engine)."""
+    from harness.report import brier_score, plan_rates
+
     key = ["scene", "realisation", "planner"]
     grasp = ["g1x", "g1y", "g2x", "g2y"]
     same = plans[key + grasp].merge(other_plans[key + grasp], on=key, suffixes=("", "_o"))
     same = same[np.isclose(same[grasp].to_numpy(), same[[g + "_o" for g in grasp]].to_numpy()).all(axis=1)]
-    mine, theirs = _plan_rates(post), _plan_rates(other)
+    mine, theirs = plan_rates(post), plan_rates(other)
     g = mine.merge(theirs, left_index=True, right_index=True, suffixes=("", "_o"))
     g = g.join(same.set_index(key)[[]], how="inner")
     if len(g) < 3:
         return {"engine_spearman": math.nan, "engine_brier": math.nan}
     forecast, success = g["sum_o"] / g["count_o"], g["sum"] / g["count"]
-    brier = float(((forecast ** 2) * (g["count"] - g["sum"]) + ((1 - forecast) ** 2) * g["sum"]).sum()
-                  / g["count"].sum())
     varied = forecast.nunique() > 1 and success.nunique() > 1
     return {"engine_spearman": float(stats.spearmanr(forecast, success).statistic) if varied else math.nan,
-            "engine_brier": brier}
+            "engine_brier": brier_score(forecast, g["sum"], g["count"])}
 
 
 def _difference(trials: pd.DataFrame, a: str, b: str, seed: int = 0) -> dict:
