@@ -192,3 +192,25 @@ def test_the_contact_manifold_shortcut_of_the_lost_check_changes_no_result(monke
     outcomes = {r.outcome for r in shortcut}
     assert {"success", "slipped"} <= outcomes, outcomes
     assert 0 < with_shortcut < 0.3 * len(queries), (with_shortcut, len(queries))
+
+
+def test_contact_clipping_holds_the_swinging_hang_bar_as_a_four_times_finer_step_does():
+    """bench lift's heavy hang bar (400 g at 10 N, the weight turns it) at two lengths whose
+    hang clears the lifted table by about 5 cm, 8 trials each: at a four times finer step
+    Bullet holds at least 15 of the 16 (docs/physics.md, "A heavy object swinging on the
+    plates"), and so does the design's step with contact clipping. The design's step
+    without clipping holds 13 of them (it shakes swinging bars out: docs/lift.md, "Hang
+    bars"), so clipping flags that did not reach pybullet would fail this."""
+    from harness.bench.lift_study import HANG_BARS, _exact_draws
+
+    hang = HANG_BARS[0]
+    trials = []
+    for length in (0.075, 0.08):
+        bar = hang.bar(length)
+        scene = bar.scene()
+        settings, approach, _ = _exact_draws(scene, 8, 3, "clipping test")
+        trials += make_trials(settings, bar.grasp(hang.offset(length)), [truth_polygon(scene)], approach)
+    for protocol in (Protocol().finer(4), Protocol(convex_clipping=True)):
+        with make_runner(protocol) as runner:
+            outcomes = [r.outcome for r in runner.run(trials)]
+        assert outcomes.count("success") >= 15, (protocol.time_step, protocol.convex_clipping, outcomes)
