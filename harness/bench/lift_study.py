@@ -405,7 +405,7 @@ def _bar_lines(res: dict) -> list[str]:
 
 def _hang_lines(res: dict) -> list[str]:
     def cm(v):
-        return "never" if v is None else f"{v * 100:+.1f}"
+        return "never" if v is None else f"{round(v * 100, 1) + 0.0:+.1f}"  # + 0.0: no "-0.0"
 
     lines = [f"hang bars ({res['engine']}, step {res['time_step'] * 1e3:.3g} ms): bars the weight turns, "
              f"{len(HANG_LENGTHS)} lengths, "
