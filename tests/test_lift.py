@@ -143,19 +143,13 @@ def test_a_hang_bar_is_lifted_exactly_while_its_far_end_clears_the_table(gap, li
     at every length: the model's reach is the closed form length - 12 mm, so P_L is 1 where
     the hang clears the lifted table by 1.25 cm and 0 where it reaches 1.25 cm into it (the
     grid's 5 mm cells and 1 mm of approach noise move the reach by less than that)."""
-    from harness.bench.lift_study import SIGMA_G, HangBar
+    from harness.bench.lift_study import SIGMA_G, HangBar, _exact_draws
 
     hang = HangBar(0.4, 0.5, 10.0)
     probe = resolve(hang.bar(0.12).scene(), {"sigma_g": SIGMA_G})
     length = probe.lift_height + axis_height(probe) + hang.short - gap
     bar = hang.bar(length)
-    scene = bar.scene()
-    settings = resolve(scene, {"sigma_g": SIGMA_G})
-    n = 200
-    approach = np.random.default_rng(1).standard_normal((n, 2, 2))
-    truth = SDFBatch(scene.grid, np.repeat(scene.true_sdf[None], n, axis=0),
-                     np.repeat(scene.true_sdf_gradient[None], n, axis=0))
-    draws = EvaluationDraws(truth, approach, np.zeros(n), np.random.default_rng(2).random((n, 2)), 1.0)
+    settings, _, draws = _exact_draws(bar.scene(), 200, 1, "hang test")
     result = evaluate_draws(bar.grasp(hang.offset(length)), draws, settings)
     assert bar.mass == pytest.approx(0.4)
     assert result.pivots.mean() == 1.0
