@@ -188,7 +188,7 @@ def _simulate(args) -> int:
         raise InputError("--frames", None, f"{args.frames} exists and is not a folder")
     if args.shapes == "posterior":
         # As many draws as eval's default analytic draws: trial i is eval's posterior trial i.
-        draws = max(pipeline.DRAWS, args.trials)
+        draws = pipeline.cell_draws(pipeline.DRAWS, args.trials)
         check_single(scene, args.seed, draws, field="--trials")
         inputs = pipeline.posterior_inputs(pipeline.open_cell(scene, settings, args.seed, 0, draws), args.trials)
     else:
@@ -258,6 +258,13 @@ def _report(args) -> int:
         raise InputError(str(out), None, "no such results folder")
     with folder_lock(out, command_line()):
         _print_report(out, figures=not args.no_figures)
+        if args.draws:
+            from harness.explain import write_draws
+            from harness.outputs import storage
+
+            with storage(out, "cannot write draws.csv"):
+                path = write_draws(out)
+            print(f"each posterior trial beside its draw's lift model in {path}", file=sys.stderr)
     return 0
 
 
@@ -510,6 +517,9 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("report", help="tables and figures from a results folder's ledger")
     p.add_argument("dir", help="results folder written by eval")
     p.add_argument("--no-figures", action="store_true", help="tables only")
+    p.add_argument("--draws", action="store_true",
+                   help="also draws.csv: each posterior trial beside the lift model's quantities on its own draw "
+                        "(the cells are drawn again: about a second each)")
     p.set_defaults(func=_report)
 
     p = sub.add_parser("compare", help="paired comparison of two runs of one experiment (B - A)")

@@ -130,11 +130,12 @@ def check_config(config, workers: int, budget_gib: float | None = None) -> float
     """Refuse (InputError naming the file and the field that sets the peak) an
     experiment whose largest cell cannot fit one worker's budget; returns that budget
     in bytes (each plan's process may grow by as much)."""
+    from harness.pipeline import cell_draws
     from harness.scene import load_scene
     from planners.registry import make_planner
 
     budget = worker_budget(workers, budget_gib)
-    draws = max(config.analytic_draws, config.posterior_trials)
+    draws = cell_draws(config.analytic_draws, config.posterior_trials)
     samples = [make_planner(e.name, e.params).shape_samples() for e in config.planners]
     largest = max(range(len(samples)), key=samples.__getitem__)
     for path, _, realisation in config.cells():

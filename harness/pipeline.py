@@ -48,6 +48,16 @@ class Cell:
     draws: EvaluationDraws
 
 
+def cell_draws(analytic_draws: int, posterior_trials: int) -> int:
+    """How many paired evaluation draws an experiment's cell draws: the analytic
+    estimate's and the posterior trials' (trial i runs on draw i), whichever is more.
+    Code that opens an experiment's cell again to look at its trials must draw exactly
+    this many: the GP's shape samples depend on how many are drawn (the approach,
+    friction and pressure deviates do not), so a cell drawn with another count pairs
+    trial i with another shape sample."""
+    return max(analytic_draws, posterior_trials)
+
+
 def open_cell(scene: Scene, settings: GraspSettings, seed: int, realisation: int, draws: int) -> Cell:
     """Observe the scene with the cell's sensor stream, fit the belief (its grid fields,
     mean shape and centre of mass computed now) and draw ``draws`` paired evaluation
@@ -175,11 +185,14 @@ def verdict_label(reason: int, turned: bool) -> str:
 def analytic_row(cell: Cell, row: dict, draws: int, reasons: int) -> dict:
     """The ledger's analytic row of an executed plan: P_F, P_L, their intervals and the
     failures over the first ``draws`` draws, and the verdicts of the first ``reasons``
-    draws (those the posterior trials share; :func:`verdict_label`)."""
-    outcomes = judge(cell, planned_grasp(row), draws)
+    draws (those the posterior trials share; :func:`verdict_label`), judged on as many of
+    the cell's draws as that takes when they are more than ``draws``."""
+    grasp = planned_grasp(row)
+    outcomes = judge(cell, grasp, draws)
     est = outcomes.estimates[0]
+    drawn = outcomes if reasons <= draws else judge(cell, grasp, reasons)
     verdicts = ",".join(verdict_label(r, turned)
-                        for r, turned in zip(outcomes.reason[0, :reasons], outcomes.pivots[0, :reasons]))
+                        for r, turned in zip(drawn.reason[0, :reasons], drawn.pivots[0, :reasons]))
     return {"scene": cell.scene.name, "realisation": cell.realisation, "planner": row["planner"],
             "draws": est.samples, "p_f": est.p_f, "ci_low": est.ci_low, "ci_high": est.ci_high,
             "ferrari_canny_mean": est.ferrari_canny_mean, "failures": json.dumps(est.failures, sort_keys=True),

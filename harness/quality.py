@@ -193,7 +193,9 @@ class DrawOutcomes:
     the object, the Ferrari-Canny quality, the lift's chance averaged over the levers (0
     out of force closure; None when the lift was not judged), and whether the squeeze
     brought the plates into force closure (harness.squeeze; never when the lift was not
-    judged)."""
+    judged). ``lift_inputs``, when asked for (:func:`evaluate_draws`), holds the lift
+    model's inputs and intermediates per draw (:data:`LIFT_INPUTS`; NaN where the plates
+    were not in force closure, so the lift was not judged)."""
 
     closure: np.ndarray
     lifted: np.ndarray | None
@@ -202,6 +204,7 @@ class DrawOutcomes:
     ferrari_canny: np.ndarray
     lift_chance: np.ndarray | None = None
     squeezed: np.ndarray | None = None
+    lift_inputs: dict | None = None
 
     @cached_property
     def estimates(self) -> list[QualityEstimate]:
@@ -220,7 +223,20 @@ class DrawOutcomes:
                 for g in range(len(k))]
 
 
-def evaluate_draws(grasps, draws: EvaluationDraws, settings: GraspSettings, lift: bool = True) -> DrawOutcomes:
+#: The lift model's quantities per draw that ``evaluate_draws(..., lift_inputs=True)``
+#: returns (harness.lift): the weight (N), the centre of mass's distance from the line
+#: through the contacts (m), the torque demand T (m, in units of the plates' friction
+#: lever), the lever sum the draw's pressure deviates give (m) and its largest value (the
+#: two half-diagonals, m), the reach beyond the contact line on the centre of mass's side
+#: (m), the hang's gap to the lifted table (clearance - reach, m: positive hangs clear),
+#: the friction coefficient and each plate's share of its friction carried as force,
+#: u = lambda W / (2 mu N).
+LIFT_INPUTS = ("weight", "distance", "demand", "lever_sum", "largest_lever_sum", "reach", "hang_gap", "friction",
+               "load_share")
+
+
+def evaluate_draws(grasps, draws: EvaluationDraws, settings: GraspSettings, lift: bool = True,
+                   lift_inputs: bool = False) -> DrawOutcomes:
     """Judge G grasps ((G, 2, 2) jaw starts, or Grasp objects) on every paired draw.
 
     Draw i perturbs g1 and g2 by sigma_g times its approach deviates, uses shape sample
@@ -240,11 +256,13 @@ def evaluate_draws(grasps, draws: EvaluationDraws, settings: GraspSettings, lift
     'missed' for P_L, as the physics finds no contact there. ``closure`` stays the
     paper's force closure at the first contacts on the whole sample (P_F).
     ``lift=False`` skips the lift (P_F alone; P_L is then NaN; the reasons are P_F's).
+    ``lift_inputs`` keeps the lift model's quantities per draw (:data:`LIFT_INPUTS`), to
+    look at why a verdict went as it did.
     """
     starts = as_starts(grasps)
     g, n = len(starts), len(draws)
     g1, g2 = executed_starts(starts, draws.approach, settings)
-    return _judge(g1, g2, np.tile(np.arange(n), g), draws, settings, lift, (g, n))
+    return _judge(g1, g2, np.tile(np.arange(n), g), draws, settings, lift, (g, n), lift and lift_inputs)
 
 
 def evaluate_pairs(grasps, draw_index, draws: EvaluationDraws, settings: GraspSettings,
@@ -263,7 +281,8 @@ def evaluate_pairs(grasps, draw_index, draws: EvaluationDraws, settings: GraspSe
     return _judge(g1, g2, index, draws, settings, lift, (len(index),))
 
 
-def _judge(g1, g2, field, draws: EvaluationDraws, settings: GraspSettings, lift: bool, shape) -> DrawOutcomes:
+def _judge(g1, g2, field, draws: EvaluationDraws, settings: GraspSettings, lift: bool, shape,
+           keep: bool = False) -> DrawOutcomes:
     """Outcomes of executed jaw starts g1, g2 (B, 2) on draws ``field`` (B,), reshaped to
     ``shape`` (see :func:`evaluate_draws` for the order of the failure reasons)."""
     b = len(field)
@@ -299,9 +318,36 @@ def _judge(g1, g2, field, draws: EvaluationDraws, settings: GraspSettings, lift:
                         draws.pressure[f], settings)
         lifted[held], pivots[held], chance[held] = verdict.lifted, verdict.pivots, verdict.chance
         reason[np.flatnonzero(held)[~verdict.lifted]] = len(PLANAR_REASONS) + verdict.reason[~verdict.lifted]
+    inputs = None
+    if keep:
+        inputs = {name: np.full(b, np.nan) for name in LIFT_INPUTS}
+        if held.any():
+            found = _lift_inputs(c1, c2, settled.w1[held], settled.w2[held], regions.area[f], com, reach, gamma[held],
+                                 draws.pressure[f], settings)
+            for name in LIFT_INPUTS:
+                inputs[name][held] = found[name]
+        inputs = {name: v.reshape(shape) for name, v in inputs.items()}
     return DrawOutcomes(closure.reshape(shape), lifted.reshape(shape) if lift else None, reason.reshape(shape),
                         pivots.reshape(shape), quality.reshape(shape), chance.reshape(shape) if lift else None,
-                        squeezed.reshape(shape))
+                        squeezed.reshape(shape), inputs)
+
+
+def _lift_inputs(c1, c2, w1, w2, area, com, reach, friction, pressure, settings: GraspSettings) -> dict:
+    """The lift model's quantities (:data:`LIFT_INPUTS`) for draws in force closure, from
+    the same inputs as harness.lift.judge and with its functions."""
+    from harness import lift as model
+
+    weight = model.weight_of(area, settings)
+    distance = model.line_distance(com, c1, c2)
+    height = model.patch_height(settings)
+    largest = model.largest_lever(w1, height), model.largest_lever(w2, height)
+    return {"weight": weight, "distance": distance,
+            "demand": model.torque_demand(weight, distance, friction, settings),
+            "lever_sum": pressure[:, 0] * largest[0] + pressure[:, 1] * largest[1],
+            "largest_lever_sum": largest[0] + largest[1], "reach": np.asarray(reach, dtype=float),
+            "hang_gap": settings.lift_height + model.axis_height(settings) - np.asarray(reach, dtype=float),
+            "friction": np.asarray(friction, dtype=float),
+            "load_share": settings.load_factor * weight / (2.0 * np.asarray(friction, dtype=float) * settings.force)}
 
 
 def _on_bodies(g1, g2, field, draws: EvaluationDraws, contacts: Contacts, closure, gamma, settings: GraspSettings):

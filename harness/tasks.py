@@ -88,7 +88,7 @@ def _cell(config: ExperimentConfig, path: str, realisation: int, labels: tuple[s
     start = time.perf_counter()
     scene = scene_of(config, path)
     cell = pipeline.open_cell(scene, settings_of(config, path), config.seed, realisation,
-                              max(config.analytic_draws, config.posterior_trials))
+                              pipeline.cell_draws(config.analytic_draws, config.posterior_trials))
     plans, analytic = [], []
     for entry in config.planners:
         if entry.label not in labels:

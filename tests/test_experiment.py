@@ -430,3 +430,58 @@ def test_compare_pairs_two_runs_that_differ_in_physics_only(tiny_run, tmp_path, 
     assert (same.difference == 0).all() and (same.agreement == 1).all() and (same.mcnemar_p == 1).all()
     assert main(["compare", str(out), str(finer)]) == 0
     assert "solver_iterations" in capsys.readouterr().out
+
+
+def test_report_draws_sets_each_posterior_trial_beside_its_own_draws_lift_model(tiny_run, capsys):
+    """`report --draws`: one row per posterior trial, its outcome the ledger's, its
+    verdict the one the ledger recorded during the run, and the lift model's quantities
+    on that draw consistent with the verdict by the model's own rules (docs/lift.md):
+    a lifted draw is level exactly when its lever sum reaches the demand, and turned and
+    still lifted only when its hang clears the table (positive gap); the weight is the
+    prism's (density x thickness x g x the sample's area, about the rectangle's)."""
+    from harness.report import load
+    from harness.scene import load_scene
+    from harness.settings import GRAVITY
+
+    _, out = tiny_run
+    assert main(["report", str(out), "--no-figures", "--draws"]) == 0
+    assert "draws.csv" in capsys.readouterr().err
+    table = pd.read_csv(out / "draws.csv")
+    data = load(out)
+    post = data["trials"][data["trials"].shapes == "posterior"]
+    assert len(table) == len(post) == 2 * 3 * 6
+    merged = table.merge(post, on=["scene", "realisation", "planner", "trial"], suffixes=("", "_ledger"))
+    assert len(merged) == len(table) and (merged.outcome == merged.outcome_ledger).all()
+    recorded = {(r.scene, r.realisation, r.planner): r.reasons.split(",") for r in data["analytic"].itertuples()}
+    assert all(r.verdict == recorded[(r.scene, r.realisation, r.planner)][r.trial] for r in table.itertuples())
+    lifted = table[table.verdict.isin(["lifted", "lifted_turned"])]
+    assert len(lifted) > 0
+    assert ((lifted.lever_sum >= lifted.demand) == (lifted.verdict == "lifted")).all()
+    assert (lifted[lifted.verdict == "lifted_turned"].hang_gap > 0).all()
+    scene = load_scene("rectangle")
+    prism = scene.physics.density * scene.physics.thickness * GRAVITY * scene.shape.area
+    assert lifted.weight.median() == pytest.approx(prism, rel=0.05)
+    planar = table[~table.verdict.isin(["lifted", "lifted_turned", "weight_slip", "weight_torque"])]
+    assert planar[["weight", "demand"]].isna().all().all()
+
+
+def test_report_draws_refuses_verdicts_that_are_not_the_ledgers(tiny_run):
+    """Drawn again, a cell must give each trial the verdict the run recorded; where it
+    does not (here the ledger's first verdict is altered, as a changed scene file or
+    model would), trial_draws refuses with one line instead of writing other draws."""
+    from harness.errors import InputError
+    from harness.explain import trial_draws
+    from harness.report import load
+
+    _, out = tiny_run
+    data = load(out)
+    first = data["analytic"].index[0]
+    labels = data["analytic"].at[first, "reasons"].split(",")
+    labels[0] = "missed" if labels[0] != "missed" else "lifted"
+    data["analytic"].at[first, "reasons"] = ",".join(labels)
+    with pytest.raises(InputError, match="analytic.reasons"):
+        trial_draws(out, data)
+    gone = load(out)
+    gone["config"]["scenes"] = [str(out / "moved.toml") for _ in gone["config"]["scenes"]]
+    with pytest.raises(InputError, match="cannot draw its cell again"):
+        trial_draws(out, gone)

@@ -219,3 +219,23 @@ def test_the_ledger_labels_a_lifted_draw_the_weight_turned_apart():
     assert 0 < (lifted & turned).sum() < lifted.sum()
     assert ((labels == "lifted_turned") == (lifted & turned)).all()
     assert ((labels == "lifted") == (lifted & ~turned)).all()
+
+
+def test_every_posterior_trial_gets_its_own_draws_verdict_when_trials_outnumber_the_analytic_draws():
+    """With 120 posterior trials and 50 analytic draws, the experiment's cell draws 120
+    (pipeline.cell_draws) and the ledger's analytic row estimates P_L on the first 50 but
+    labels all 120 trials, each with evaluate_draws' verdict on that trial's own draw."""
+    from harness import pipeline
+
+    scene = load_scene("rectangle")
+    settings = resolve(scene, {"density": 3000.0, "force": 8.0})
+    assert pipeline.cell_draws(50, 120) == 120 and pipeline.cell_draws(500, 24) == 500
+    cell = pipeline.open_cell(scene, settings, 0, 0, pipeline.cell_draws(50, 120))
+    row = {"planner": "x", "g1x": 0.02, "g1y": -0.04, "g2x": 0.02, "g2y": 0.04}
+    analytic = pipeline.analytic_row(cell, row, 50, 120)
+    labels = analytic["reasons"].split(",")
+    out = pipeline.judge(cell, pipeline.planned_grasp(row), 120)
+    assert labels == [pipeline.verdict_label(r, t) for r, t in zip(out.reason[0], out.pivots[0])]
+    assert analytic["draws"] == 50
+    assert analytic["p_l"] == pipeline.judge(cell, pipeline.planned_grasp(row), 50).estimates[0].p_l
+    assert len(set(labels)) > 1  # the draws differ: a label per trial is not one label repeated

@@ -182,7 +182,8 @@ def write_frames(trials: pd.DataFrame, run: dict, folder: Path, count: int = FRA
         for r in picked.itertuples():
             scene = load_scene(paths[r.scene])
             settings = resolve(scene, config.settings, config.protocol())
-            cell = pipeline.open_cell(scene, settings, config.seed, r.realisation, config.analytic_draws)
+            cell = pipeline.open_cell(scene, settings, config.seed, r.realisation,
+                                      pipeline.cell_draws(config.analytic_draws, config.posterior_trials))
             inputs = pipeline.posterior_inputs(cell, config.posterior_trials).part(slice(r.trial, r.trial + 1))
             grasp = pipeline.planned_grasp(plans.loc[(r.scene, r.realisation, r.planner)].to_dict())
             trial = make_trials(settings, grasp, inputs.polygons, inputs.approach, inputs.friction)

@@ -1,0 +1,88 @@
+"""Each posterior trial beside the lift model's view of its own draw (``gpis-harness
+report DIR --draws`` writes it to ``draws.csv``): why P_L said what it did about the
+trial that the physics then ran.
+
+Posterior trial i of a plan runs on evaluation draw i of its cell: shape sample i,
+approach deviates i, friction deviate i (harness.pipeline). The ledger keeps each
+trial's verdict (the analytic rows' ``reasons``) but not the model's quantities behind
+it, so this module opens each cell again exactly as the experiment opened it (the same
+seed, realisation, settings and number of draws, :func:`harness.pipeline.cell_draws`:
+the GP's shape samples depend on how many are drawn) and judges each executed plan on
+the first posterior-trials draws with the lift model's quantities kept
+(:data:`harness.quality.LIFT_INPUTS`). Every row's verdict is checked against the one
+the ledger recorded during the run; a mismatch (a scene file changed since the run, or
+another version of the model) is refused, not written.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from harness.errors import InputError
+
+#: The table's columns before the lift model's quantities (harness.quality.LIFT_INPUTS).
+KEYS = ("scene", "realisation", "planner", "trial", "outcome", "pivot", "verdict")
+
+
+def trial_draws(out_dir: Path, data: dict | None = None) -> pd.DataFrame:
+    """One row per posterior trial of the latest experiment in ``out_dir``: its keys, its
+    outcome and the angle it turned in the gripper (``pivot``, rad), its draw's verdict
+    (harness.pipeline.verdict_label) and the lift model's quantities on that draw (NaN
+    where the plates were not in force closure). Raises InputError when a verdict
+    recomputed here is not the one the ledger recorded."""
+    from harness import pipeline
+    from harness.config import ExperimentConfig
+    from harness.quality import LIFT_INPUTS, evaluate_draws
+    from harness.report import load
+    from harness.tasks import scene_of, settings_of
+
+    data = data if data is not None else load(out_dir)
+    config = ExperimentConfig.from_dict(data["config"])
+    paths = dict(zip(config.scene_names, config.scenes))
+    trials = data["trials"]
+    post = trials[trials.shapes == "posterior"].set_index(["scene", "realisation", "planner", "trial"]).sort_index()
+    recorded = data["analytic"].set_index(["scene", "realisation", "planner"])["reasons"]
+    plans = data["plans"]
+    plans = plans[plans.executed.astype(bool)]
+    n = config.posterior_trials
+    rows = []
+    for (name, realisation), cell_plans in plans.groupby(["scene", "realisation"], sort=True):
+        path = paths.get(name)
+        if path is None or not Path(path).is_file():
+            raise InputError(str(out_dir), "config.scenes",
+                             f"scene '{name}' is not at {path}: cannot draw its cell again")
+        settings = settings_of(config, path)
+        cell = pipeline.open_cell(scene_of(config, path), settings, config.seed, int(realisation),
+                                  pipeline.cell_draws(config.analytic_draws, n))
+        draws = cell.draws.first(n)
+        for plan in cell_plans.to_dict("records"):
+            out = evaluate_draws(pipeline.planned_grasp(plan), draws, settings, lift_inputs=True)
+            verdicts = [pipeline.verdict_label(r, t) for r, t in zip(out.reason[0], out.pivots[0])]
+            key = (name, realisation, plan["planner"])
+            ledger = str(recorded.get(key, "") or "").split(",")
+            if ledger != [""] and _reasons(verdicts[:len(ledger)]) != _reasons(ledger):
+                raise InputError(str(out_dir), "analytic.reasons",
+                                 f"{name} realisation {realisation} {plan['planner']}: the verdicts drawn again "
+                                 "differ from the ledger's (a scene or the model changed since the run)")
+            for k in range(n):
+                trial = post.loc[key + (k,)] if key + (k,) in post.index else None
+                rows.append((name, realisation, plan["planner"], k,
+                             None if trial is None else trial.outcome, np.nan if trial is None else trial.pivot,
+                             verdicts[k], *(float(out.lift_inputs[q][0, k]) for q in LIFT_INPUTS)))
+    return pd.DataFrame(rows, columns=[*KEYS, *LIFT_INPUTS])
+
+
+def _reasons(labels: list[str]) -> list[str]:
+    """Verdicts as ledgers written before the 'lifted_turned' label recorded them."""
+    return ["lifted" if v == "lifted_turned" else v for v in labels]
+
+
+def write_draws(out_dir: Path) -> Path:
+    """``draws.csv`` in ``out_dir`` (:func:`trial_draws`), written atomically."""
+    from harness.outputs import write_atomic
+
+    table = trial_draws(out_dir)
+    return write_atomic(Path(out_dir) / "draws.csv", lambda tmp: table.to_csv(tmp, index=False))
