@@ -10,8 +10,9 @@ seed, realisation, settings and number of draws, :func:`harness.pipeline.cell_dr
 the GP's shape samples depend on how many are drawn) and judges each executed plan on
 the first posterior-trials draws with the lift model's quantities kept
 (:data:`harness.quality.LIFT_INPUTS`). Every row's verdict is checked against the one
-the ledger recorded during the run; a mismatch (a scene file changed since the run, or
-another version of the model) is refused, not written.
+the ledger recorded during the run (runs recorded before the ledger kept verdicts are
+not checked); a mismatch (a scene file changed since the run, or another version of the
+model) is refused, not written.
 """
 
 from __future__ import annotations
@@ -62,8 +63,9 @@ def trial_draws(out_dir: Path, data: dict | None = None) -> pd.DataFrame:
             out = evaluate_draws(pipeline.planned_grasp(plan), draws, settings, lift_inputs=True)
             verdicts = [pipeline.verdict_label(r, t) for r, t in zip(out.reason[0], out.pivots[0])]
             key = (name, realisation, plan["planner"])
-            ledger = str(recorded.get(key, "") or "").split(",")
-            if ledger != [""] and _reasons(verdicts[:len(ledger)]) != _reasons(ledger):
+            ledger = recorded.get(key)
+            ledger = ledger.split(",") if isinstance(ledger, str) and ledger else []  # older ledgers: none
+            if ledger and _reasons(verdicts[:len(ledger)]) != _reasons(ledger):
                 raise InputError(str(out_dir), "analytic.reasons",
                                  f"{name} realisation {realisation} {plan['planner']}: the verdicts drawn again "
                                  "differ from the ledger's (a scene or the model changed since the run)")

@@ -56,6 +56,12 @@ def axis_height(settings: GraspSettings) -> float:
     return PLATE_CLEARANCE + 0.5 * patch_height(settings)
 
 
+def clearance(settings: GraspSettings) -> float:
+    """How far (m) a turned object hanging below the grasp axis may reach and still clear
+    the lifted table: the lift height plus the axis's height above the table."""
+    return settings.lift_height + axis_height(settings)
+
+
 def weight_of(area, settings: GraspSettings) -> np.ndarray:
     """The weight (N) of a prism of this cross-section area (m^2), the settings' thickness
     and density."""
@@ -99,12 +105,20 @@ class LiftVerdict:
     """Per draw: lifted or not (B,), the lift reason index into LIFT_REASONS (-1 when
     lifted), whether the torque turned the object (lifted or not), and the chance of the
     lift averaged over the levers instead of drawn (smooth; its mean over draws estimates
-    P_L with less variance than the verdicts' share)."""
+    P_L with less variance than the verdicts' share); and the quantities the verdict was
+    made of: the weight (N), the centre of mass's distance from the contact line (m), the
+    torque demand T (m; NaN where the weight slides the object out), the drawn lever sum
+    kappa_1 + kappa_2 and its largest value (m)."""
 
     lifted: np.ndarray
     reason: np.ndarray
     pivots: np.ndarray
     chance: np.ndarray
+    weight: np.ndarray
+    distance: np.ndarray
+    demand: np.ndarray
+    lever: np.ndarray
+    largest_lever: np.ndarray
 
 
 def judge(c1, c2, w1, w2, area, com, reach, friction, pressure, settings: GraspSettings) -> LiftVerdict:
@@ -117,17 +131,20 @@ def judge(c1, c2, w1, w2, area, com, reach, friction, pressure, settings: GraspS
     placing each plate's lever in its admissible range.
     """
     weight = weight_of(area, settings)
-    demand = torque_demand(weight, line_distance(com, c1, c2), friction, settings)
+    distance = line_distance(com, c1, c2)
+    demand = torque_demand(weight, distance, friction, settings)
     height = patch_height(settings)
     largest = largest_lever(w1, height), largest_lever(w2, height)
+    lever = pressure[:, 0] * largest[0] + pressure[:, 1] * largest[1]
     slip = np.isnan(demand)
-    pivots = ~slip & (demand > pressure[:, 0] * largest[0] + pressure[:, 1] * largest[1])
-    hangs_clear = reach < settings.lift_height + axis_height(settings)
+    pivots = ~slip & (demand > lever)
+    hangs_clear = reach < clearance(settings)
     reason = np.full(len(weight), -1, dtype=np.int8)
     reason[slip] = SLIP
     reason[pivots & ~hangs_clear] = TORQUE
     hold = hold_probability(demand, *largest)
-    return LiftVerdict(reason < 0, reason, pivots, np.where(slip, 0.0, np.where(hangs_clear, 1.0, hold)))
+    return LiftVerdict(reason < 0, reason, pivots, np.where(slip, 0.0, np.where(hangs_clear, 1.0, hold)), weight,
+                       distance, demand, lever, largest[0] + largest[1])
 
 
 def line_distance(point, c1, c2) -> np.ndarray:
@@ -157,7 +174,7 @@ def smooth_lift(distance, distance_sd, weight, friction, w1, w2, reach, reach_sc
     nodes, weights = (-math.sqrt(3.0), 0.0, math.sqrt(3.0)), (1 / 6, 2 / 3, 1 / 6)
     hold = sum(w * hold_probability(torque_demand(weight, np.abs(distance + z * distance_sd), friction, settings),
                                     l1, l2) for z, w in zip(nodes, weights))
-    clear = ndtr((settings.lift_height + axis_height(settings) - reach) / reach_scale)
+    clear = ndtr((clearance(settings) - reach) / reach_scale)
     slides = np.isnan(torque_demand(weight, 0.0, friction, settings))
     return np.where(slides, 0.0, hold + (1.0 - hold) * clear)
 

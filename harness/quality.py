@@ -322,8 +322,7 @@ def _judge(g1, g2, field, draws: EvaluationDraws, settings: GraspSettings, lift:
     if keep:
         inputs = {name: np.full(b, np.nan) for name in LIFT_INPUTS}
         if held.any():
-            found = _lift_inputs(c1, c2, settled.w1[held], settled.w2[held], regions.area[f], com, reach, gamma[held],
-                                 draws.pressure[f], settings)
+            found = _lift_inputs(verdict, reach, gamma[held], settings)
             for name in LIFT_INPUTS:
                 inputs[name][held] = found[name]
         inputs = {name: v.reshape(shape) for name, v in inputs.items()}
@@ -332,22 +331,17 @@ def _judge(g1, g2, field, draws: EvaluationDraws, settings: GraspSettings, lift:
                         squeezed.reshape(shape), inputs)
 
 
-def _lift_inputs(c1, c2, w1, w2, area, com, reach, friction, pressure, settings: GraspSettings) -> dict:
-    """The lift model's quantities (:data:`LIFT_INPUTS`) for draws in force closure, from
-    the same inputs as harness.lift.judge and with its functions."""
-    from harness import lift as model
+def _lift_inputs(verdict, reach, friction, settings: GraspSettings) -> dict:
+    """The lift model's quantities (:data:`LIFT_INPUTS`) of draws in force closure: the
+    verdict's own (harness.lift.LiftVerdict), the reach, its gap to the lifted table, the
+    friction and the load share."""
+    from harness.lift import clearance
 
-    weight = model.weight_of(area, settings)
-    distance = model.line_distance(com, c1, c2)
-    height = model.patch_height(settings)
-    largest = model.largest_lever(w1, height), model.largest_lever(w2, height)
-    return {"weight": weight, "distance": distance,
-            "demand": model.torque_demand(weight, distance, friction, settings),
-            "lever_sum": pressure[:, 0] * largest[0] + pressure[:, 1] * largest[1],
-            "largest_lever_sum": largest[0] + largest[1], "reach": np.asarray(reach, dtype=float),
-            "hang_gap": settings.lift_height + model.axis_height(settings) - np.asarray(reach, dtype=float),
-            "friction": np.asarray(friction, dtype=float),
-            "load_share": settings.load_factor * weight / (2.0 * np.asarray(friction, dtype=float) * settings.force)}
+    reach, friction = np.asarray(reach, dtype=float), np.asarray(friction, dtype=float)
+    return {"weight": verdict.weight, "distance": verdict.distance, "demand": verdict.demand,
+            "lever_sum": verdict.lever, "largest_lever_sum": verdict.largest_lever, "reach": reach,
+            "hang_gap": clearance(settings) - reach, "friction": friction,
+            "load_share": settings.load_factor * verdict.weight / (2.0 * friction * settings.force)}
 
 
 def _on_bodies(g1, g2, field, draws: EvaluationDraws, contacts: Contacts, closure, gamma, settings: GraspSettings):

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from harness.grasp import SDFBatch
-from harness.lift import axis_height
+from harness.lift import clearance
 from harness.physics.simulate import make_trials, truth_polygon
 from harness.physics.engines import make_runner
 from harness.protocol import Protocol
@@ -199,7 +199,7 @@ def hang_sweep(hang: HangBar, trials: int = 12, seed: int = 0, runner=None) -> l
             held = [r for r in results if r.outcome == "success" and r.pivot > TURNED]
             slides = [settings.lift_height - r.rise - d * math.sin(r.pivot) for r in held if r.pivot < AT_REST]
             rows.append({"length": float(length), "offset": d,
-                         "gap": settings.lift_height + axis_height(settings) - (float(length) - hang.short),
+                         "gap": clearance(settings) - (float(length) - hang.short),
                          "success": float(np.mean([r.outcome == "success" for r in results])),
                          "turned": float(np.mean([r.pivot > TURNED for r in results])),
                          "p_l": float(analytic.lifted.mean()), "turns": float(analytic.pivots.mean()),
