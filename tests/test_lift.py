@@ -156,6 +156,36 @@ def test_a_hang_bar_is_lifted_exactly_while_its_far_end_clears_the_table(gap, li
     assert result.lifted.mean() == lifted
 
 
+@pytest.mark.parametrize("gap, lifted", [(0.0125, 1.0), (-0.0125, 0.0)])
+def test_a_handle_on_a_curved_wall_is_lifted_exactly_while_its_far_end_clears_the_table(gap, lifted):
+    """bench lift's disk with a handle (400 g, 10 N), gripped across the disk's centre on
+    its curved wall: the weight turns it at every length, and the model's reach is the
+    closed form length + the handle's half width (the capsule's round end), so P_L is 1
+    where the hang clears the lifted table by 1.25 cm and 0 where it reaches 1.25 cm
+    into it; its centre of mass lies where the disk and the handle's areas put it."""
+    from harness.bench.lift_study import HANG_CASES, SIGMA_G, HangHandle, _exact_draws
+
+    handle = next(h for h in HANG_CASES if isinstance(h, HangHandle))
+    probe = resolve(handle.scene(0.1), {"sigma_g": SIGMA_G})
+    length = probe.lift_height + axis_height(probe) - handle.half_width - gap
+    scene = handle.scene(length)
+    settings, _, draws = _exact_draws(scene, 200, 1, "handle test")
+    result = evaluate_draws(handle.grasp(length), draws, settings)
+    # The centre of mass by quadrature: the disk (moment 0 about its centre), the handle's
+    # strip beyond the disk's wall, and its round end (a half disk).
+    from scipy.integrate import quad
+
+    r, w = handle.radius, handle.half_width
+    strip = quad(lambda y: length - np.sqrt(r * r - y * y), -w, w)[0]
+    strip_moment = quad(lambda y: 0.5 * (length ** 2 - (r * r - y * y)), -w, w)[0]
+    cap, cap_moment = 0.5 * np.pi * w * w, 0.5 * np.pi * w * w * (length + 4 * w / (3 * np.pi))
+    arm = (strip_moment + cap_moment) / (np.pi * r * r + strip + cap)
+    assert handle.com_offset(length) == pytest.approx(arm, rel=0.01)
+    assert scene.physics.density * scene.shape.area * scene.physics.thickness == pytest.approx(0.4, rel=1e-6)
+    assert result.pivots.mean() == 1.0
+    assert result.lifted.mean() == lifted
+
+
 def test_a_lifted_draw_is_in_force_closure_or_squeezed_into_it_and_the_reasons_partition_the_draws():
     scene = load_scene("stapler")
     from harness.belief import build_belief

@@ -162,11 +162,95 @@ class HangBar:
     def offset(self, length: float) -> float:
         return 0.5 * length - self.short
 
+    # What hang_sweep asks of a hang case (HangBar and HangHandle alike).
+
+    @property
+    def lengths(self) -> tuple:
+        return HANG_LENGTHS
+
+    def scene(self, length: float) -> Scene:
+        return self.bar(length).scene()
+
+    def grasp(self, length: float) -> np.ndarray:
+        return self.bar(length).grasp(self.offset(length))
+
+    def reach(self, length: float) -> float:
+        """The far end's reach beyond the grasp axis (m)."""
+        return length - self.short
+
+    def com_offset(self, length: float) -> float:
+        """The centre of mass's distance from the grasp axis (m)."""
+        return self.offset(length)
+
 
 #: The hang bars' lengths (m): from a hang about 7 cm clear of the lifted table to 5 cm into it.
 HANG_LENGTHS = tuple(np.round(np.arange(0.06, 0.1751, 0.005), 3))
 #: A heavy and a light bar, both turned by their weight from 12 cm on (where they hang near the table).
 HANG_BARS = (HangBar(0.4, 0.5, 10.0), HangBar(0.1, 0.5, 3.0))
+
+
+@dataclass(frozen=True)
+class HangHandle:
+    """The hang test on a curved wall: a disk (``radius``) gripped across its centre,
+    with a straight handle (a capsule of half width ``half_width``) of growing length
+    whose weight turns it in the plates; the mass is kept by the density. The plates
+    touch the disk's curved wall along a line across the thickness (no flat patch), and
+    the far end reaches length + half_width beyond the grasp axis."""
+
+    mass: float
+    friction: float
+    force: float
+    radius: float = 0.015
+    half_width: float = 0.006
+    thickness: float = 0.03
+
+    @property
+    def label(self) -> str:
+        return (f"{self.mass * 1e3:g} g disk r {self.radius * 1e3:g} mm + handle, {self.thickness * 100:g} cm "
+                f"thick, mu {self.friction:g}, {self.force:g} N")
+
+    @property
+    def lengths(self) -> tuple:
+        return HANDLE_LENGTHS
+
+    def _shape(self, length: float):
+        import shapely
+        from shapely.geometry import LineString, Point
+
+        return shapely.union_all([Point(0, 0).buffer(self.radius, quad_segs=64),
+                                  LineString([(0, 0), (length, 0)]).buffer(self.half_width, quad_segs=32)])
+
+    def _centre(self, length: float) -> float:
+        """Where the disk's centre lies (x, m) once the shape is centred on the grid."""
+        return -0.5 * (length + self.half_width - self.radius)
+
+    def scene(self, length: float) -> Scene:
+        density = self.mass / (self._shape(length).area * self.thickness)
+        data = {"name": "handle", "grid": {"size": 40, "extent": 0.2},
+                "shape": {"type": "union", "offset": [self._centre(length), 0.0],
+                          "parts": [{"type": "disk", "radius": self.radius, "center": [0.0, 0.0]},
+                                    {"type": "capsule", "start": [0.0, 0.0], "end": [length, 0.0],
+                                     "radius": self.half_width}]},
+                "sensor": {"noise": 0.0005},
+                "physics": {"thickness": self.thickness, "density": density, "friction": self.friction},
+                "gripper": {"opening": 0.1, "jaw_width": 0.01, "force": self.force}}
+        return parse_scene(data, f"<handle {self.label}, {length * 100:g} cm>", Path("."))
+
+    def grasp(self, length: float) -> np.ndarray:
+        x, half = self._centre(length), self.radius + CLEARANCE
+        return np.array([[x, -half], [x, half]])
+
+    def reach(self, length: float) -> float:
+        return length + self.half_width
+
+    def com_offset(self, length: float) -> float:
+        return self._shape(length).centroid.x
+
+
+#: The handle's lengths (m): from a hang about 6 cm clear of the lifted table to 3 cm into it.
+HANDLE_LENGTHS = tuple(np.round(np.arange(0.05, 0.1451, 0.005), 3))
+#: The hang cases of bench lift: the two bars and the heavy handle (400 g at 10 N, as the heavy bar).
+HANG_CASES = HANG_BARS + (HangHandle(0.4, 0.5, 10.0),)
 #: A turned bar held at a smaller angle than this (rad) has come to rest short of the hang.
 AT_REST = 1.4
 #: Hang bars whose hang the model calls at least this clear of the lifted table (m) should all be held.
@@ -176,7 +260,7 @@ CLEAR_GAP = 0.02
 HANG_FINER = 4
 
 
-def hang_sweep(hang: HangBar, trials: int = 12, seed: int = 0, runner=None) -> list[dict]:
+def hang_sweep(hang: "HangBar | HangHandle", trials: int = 12, seed: int = 0, runner=None) -> list[dict]:
     """Per length: the model's gap between the hanging bar and the lifted table
     (clearance - reach, m), simulated success, the share of trials that turned, the
     outcomes, and for the turned trials that ended held the median angle and, of those
@@ -188,18 +272,18 @@ def hang_sweep(hang: HangBar, trials: int = 12, seed: int = 0, runner=None) -> l
     own = runner is None
     runner = runner or make_runner()
     try:
-        for length in HANG_LENGTHS:
-            bar, d = hang.bar(float(length)), hang.offset(float(length))
-            scene = bar.scene()
+        for length in hang.lengths:
+            length = float(length)
+            d = hang.com_offset(length)
+            scene = hang.scene(length)
             settings, approach, draws = _exact_draws(scene, max(trials, ANALYTIC_DRAWS), seed, "hang", hang.label,
                                                      int(round(length * 1e3)))
-            grasp = bar.grasp(d)
+            grasp = hang.grasp(length)
             results = runner.run(make_trials(settings, grasp, [truth_polygon(scene)], approach[:trials]))
             analytic = evaluate_draws(grasp, draws, settings)
             held = [r for r in results if r.outcome == "success" and r.pivot > TURNED]
             slides = [settings.lift_height - r.rise - d * math.sin(r.pivot) for r in held if r.pivot < AT_REST]
-            rows.append({"length": float(length), "offset": d,
-                         "gap": clearance(settings) - (float(length) - hang.short),
+            rows.append({"length": length, "offset": d, "gap": clearance(settings) - hang.reach(length),
                          "success": float(np.mean([r.outcome == "success" for r in results])),
                          "turned": float(np.mean([r.pivot > TURNED for r in results])),
                          "p_l": float(analytic.lifted.mean()), "turns": float(analytic.pivots.mean()),
@@ -212,7 +296,7 @@ def hang_sweep(hang: HangBar, trials: int = 12, seed: int = 0, runner=None) -> l
     return rows
 
 
-def hang_validate(bars=HANG_BARS, trials: int = 12, seed: int = 0, engine: str = "pybullet",
+def hang_validate(bars=HANG_CASES, trials: int = 12, seed: int = 0, engine: str = "pybullet",
                   finer: int = 1) -> dict:
     """Every hang bar's sweep and the gaps (m) at which simulated success and P_L fall
     through 0.5 as the bar lengthens; their difference (success's less P_L's: positive
@@ -407,8 +491,9 @@ def _hang_lines(res: dict) -> list[str]:
     def cm(v):
         return "never" if v is None else f"{round(v * 100, 1) + 0.0:+.1f}"  # + 0.0: no "-0.0"
 
-    lines = [f"hang bars ({res['engine']}, step {res['time_step'] * 1e3:.3g} ms): bars the weight turns, "
-             f"{len(HANG_LENGTHS)} lengths, "
+    lines = [f"hang cases ({res['engine']}, step {res['time_step'] * 1e3:.3g} ms): bars and a disk with a handle "
+             f"that the weight turns, "
+             f"{len(HANG_LENGTHS)} lengths ({len(HANDLE_LENGTHS)} for the handle), "
              f"{res['trials_per_length']} trials each; the gap (cm) between the model's hang and the lifted "
              f"table where success and P_L fall through 0.5, and the success of bars hanging "
              f"{CLEAR_GAP * 100:g} cm clear or more",
