@@ -64,12 +64,8 @@ class Bar:
         return self.density * self.length * self.width * self.thickness
 
     def scene(self) -> Scene:
-        data = {"name": "bar", "grid": {"size": 40, "extent": 0.2},
-                "shape": {"type": "rectangle", "width": self.length, "height": self.width, "center": [0.0, 0.0]},
-                "sensor": {"noise": 0.0005},
-                "physics": {"thickness": self.thickness, "density": self.density, "friction": self.friction},
-                "gripper": {"opening": 0.1, "jaw_width": 0.01, "force": self.force}}
-        return parse_scene(data, f"<bar {self.label}>", Path("."))
+        shape = {"type": "rectangle", "width": self.length, "height": self.width, "center": [0.0, 0.0]}
+        return _solid("bar", shape, self.thickness, self.density, self.friction, self.force, f"<bar {self.label}>")
 
     def offsets(self) -> np.ndarray:
         """From the centre to 5 mm short of the bar's end."""
@@ -78,6 +74,16 @@ class Bar:
     def grasp(self, offset: float) -> np.ndarray:
         half = 0.5 * self.width + CLEARANCE
         return np.array([[offset, -half], [offset, half]])
+
+
+def _solid(name: str, shape: dict, thickness: float, density: float, friction: float, force: float,
+           source: str) -> Scene:
+    """A fully observed test object (a scene of ``shape``) on a 40-cell, 20 cm grid, with
+    the built-in parallel jaw (10 cm opening, 1 cm plates) at ``force``."""
+    data = {"name": name, "grid": {"size": 40, "extent": 0.2}, "shape": shape, "sensor": {"noise": 0.0005},
+            "physics": {"thickness": thickness, "density": density, "friction": friction},
+            "gripper": {"opening": 0.1, "jaw_width": 0.01, "force": force}}
+    return parse_scene(data, source, Path("."))
 
 
 #: The validation rows: lengths, densities, frictions, grip forces, thicknesses and
@@ -225,16 +231,12 @@ class HangHandle:
         return -0.5 * (length + self.half_width - self.radius)
 
     def scene(self, length: float) -> Scene:
+        shape = {"type": "union", "offset": [self._centre(length), 0.0],
+                 "parts": [{"type": "disk", "radius": self.radius, "center": [0.0, 0.0]},
+                           {"type": "capsule", "start": [0.0, 0.0], "end": [length, 0.0], "radius": self.half_width}]}
         density = self.mass / (self._shape(length).area * self.thickness)
-        data = {"name": "handle", "grid": {"size": 40, "extent": 0.2},
-                "shape": {"type": "union", "offset": [self._centre(length), 0.0],
-                          "parts": [{"type": "disk", "radius": self.radius, "center": [0.0, 0.0]},
-                                    {"type": "capsule", "start": [0.0, 0.0], "end": [length, 0.0],
-                                     "radius": self.half_width}]},
-                "sensor": {"noise": 0.0005},
-                "physics": {"thickness": self.thickness, "density": density, "friction": self.friction},
-                "gripper": {"opening": 0.1, "jaw_width": 0.01, "force": self.force}}
-        return parse_scene(data, f"<handle {self.label}, {length * 100:g} cm>", Path("."))
+        return _solid("handle", shape, self.thickness, density, self.friction, self.force,
+                      f"<handle {self.label}, {length * 100:g} cm>")
 
     def grasp(self, length: float) -> np.ndarray:
         x, half = self._centre(length), self.radius + CLEARANCE
