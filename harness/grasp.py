@@ -207,7 +207,8 @@ class Contacts:
     contact: patch1, patch2 (B, K, 2) hold where each of the K lines meets it (NaN for a
     line that does not touch, and where there is no contact), and w1, w2 (B,) the
     patch's extent along the outline (0 for a point or curved contact, up to the plate's
-    width for a flat face; NaN where there is no contact)."""
+    width for a flat face; NaN where there is no contact). edge1, edge2 (B,) say whether
+    the plate presses the wall with its edge (:func:`edge_contacts`)."""
 
     c1: np.ndarray
     c2: np.ndarray
@@ -218,6 +219,40 @@ class Contacts:
     w2: np.ndarray
     patch1: np.ndarray
     patch2: np.ndarray
+    edge1: np.ndarray
+    edge2: np.ndarray
+
+
+def edge_contacts(depth: np.ndarray, first: np.ndarray) -> np.ndarray:
+    """Whether each plate presses the wall with its edge (B,): the wall meets the plate at
+    an outer plate line and recedes from it across the plate, at a slope that would take
+    it more than PATCH_DEPTH from the plate over the plate's width. A wall inclined to the
+    plate, or a curved wall whose tangent point lies beyond the plate, touches the plate
+    only along its edge; when the object turns about the grasp axis, the wall's distance
+    from that edge then varies along it, and the pressure goes to one end of the edge
+    (docs/lift.md, "Edge contacts"). A flat face (within PATCH_DEPTH of parallel to the
+    plate) and a curved wall whose tangent point lies on the plate are not edge contacts;
+    nor are two walls parallel to each other (:func:`find_contacts` checks that): the
+    closing plates turn them flush.
+
+    depth (B, K): each plate line's distance (m) from the plate to the wall beyond the
+    first contact (0 on the first line, inf where a line misses); first (B,): the first
+    contact's line. The slope at the edge is that of the quadratic through the outer line
+    and its two inward neighbours (of the line beside it alone when the next misses), so
+    that a curved wall whose closest approach lies on the plate has none."""
+    b, k = depth.shape
+    if k < 3:
+        return np.zeros(b, dtype=bool)
+    rows = np.arange(b)
+    outer = (first == 0) | (first == k - 1)
+    step = np.where(first == 0, 1, -1)
+    base = depth[rows, first]
+    with np.errstate(invalid="ignore"):
+        near = depth[rows, np.clip(first + step, 0, k - 1)] - base
+        far = depth[rows, np.clip(first + 2 * step, 0, k - 1)] - base
+        # Per plate line: the one-sided slope at the edge of the quadratic through (0, 0), (1, near), (2, far).
+        slope = np.where(np.isfinite(far), 2.0 * near - 0.5 * far, near)
+        return outer & np.isfinite(near) & (slope * (k - 1) > PATCH_DEPTH)
 
 
 def find_contacts(fields: SDFBatch, g1, g2, jaw_width: float, field_index=None,
@@ -241,13 +276,14 @@ def find_contacts(fields: SDFBatch, g1, g2, jaw_width: float, field_index=None,
         field_index = np.arange(b) if len(fields) == b else np.zeros(b, dtype=np.int64)
     field_index = np.broadcast_to(np.asarray(field_index, dtype=np.int64), (b,))
     out = Contacts(*(np.full((b, 2), np.nan) for _ in range(4)), np.empty(b, dtype=np.int8),
-                   np.full(b, np.nan), np.full(b, np.nan), *(np.full((b, plate_lines, 2), np.nan) for _ in range(2)))
+                   np.full(b, np.nan), np.full(b, np.nan), *(np.full((b, plate_lines, 2), np.nan) for _ in range(2)),
+                   np.zeros(b, dtype=bool), np.zeros(b, dtype=bool))
     steps = march_steps(np.linalg.norm(g2 - g1, axis=1), fields.grid.cell)
     chunk = max(1, _MAX_EVALUATIONS // (plate_lines * int(steps.max(initial=2))))
     for start in range(0, b, chunk):
         s = slice(start, min(b, start + chunk))
         part = _contacts_chunk(fields, g1[s], g2[s], jaw_width, field_index[s], plate_lines, steps[s])
-        for name in ("c1", "c2", "n1", "n2", "status", "w1", "w2", "patch1", "patch2"):
+        for name in ("c1", "c2", "n1", "n2", "status", "w1", "w2", "patch1", "patch2", "edge1", "edge2"):
             getattr(out, name)[s] = getattr(part, name)
     return out
 
@@ -328,15 +364,43 @@ def _contacts_chunk(fields: SDFBatch, g1, g2, jaw_width, fidx, plate_lines, step
     depth = PATCH_DEPTH / safe[:, None]
     spacing = jaw_width / max(plate_lines - 1, 1)
     line_index = np.arange(plate_lines)
-    widths, patches = [], []
-    for t, touch in ((t1, t1 <= t1[rows, best1][:, None] + depth), (t2, t2 >= t2[rows, best2][:, None] - depth)):
+    widths, patches, edges, slopes = [], [], [], []
+    for t, touch, best, sense in ((t1, t1 <= t1[rows, best1][:, None] + depth, best1, 1.0),
+                                  (t2, t2 >= t2[rows, best2][:, None] - depth, best2, -1.0)):
         touch &= (status == OK)[:, None]
         first = np.where(touch, line_index, plate_lines).min(axis=1)
         last = np.where(touch, line_index, -1).max(axis=1)
         widths.append(np.where(status == OK, (last - first) * spacing, np.nan))
         where = starts + np.where(touch, t, np.nan)[:, :, None] * d[:, None, :]
         patches.append(where)
-    return Contacts(point[:b], point[b:], normal[:b], normal[b:], status, *widths, *patches)
+        with np.errstate(invalid="ignore"):
+            beyond = sense * (t - t[rows, best][:, None]) * length[:, None]  # the wall's distance beyond the first line
+        beyond = np.where(np.isfinite(t), beyond, np.inf)
+        edges.append(edge_contacts(beyond, best) & (status == OK))
+        slopes.append(_line_slope(beyond))
+    # Walls parallel to each other within PATCH_DEPTH over the plate's width, however
+    # inclined to the plates, are turned flush with both by the closing plates (the
+    # squeeze): their contacts are faces, not edges. Seen from the two plates, parallel
+    # walls recede towards opposite sides (their slopes across the lines cancel); the two
+    # walls of a wedge recede towards the same side.
+    with np.errstate(invalid="ignore"):
+        wedge = np.abs(slopes[0] + slopes[1]) * (plate_lines - 1) > PATCH_DEPTH
+    n1, n2 = normal[:b], normal[b:]
+    return Contacts(point[:b], point[b:], n1, n2, status, *widths, *patches, edges[0] & wedge, edges[1] & wedge)
+
+
+def _line_slope(depth: np.ndarray) -> np.ndarray:
+    """The least-squares slope (B,) of each row's depths (B, K) against the line index,
+    over its finite entries (NaN with fewer than two)."""
+    k = np.arange(depth.shape[1], dtype=float)
+    finite = np.isfinite(depth)
+    count = finite.sum(axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean_k = np.where(finite, k, 0.0).sum(axis=1) / count
+        mean_d = np.where(finite, depth, 0.0).sum(axis=1) / count
+        dk = np.where(finite, k - mean_k[:, None], 0.0)
+        dd = np.where(finite, depth - mean_d[:, None], 0.0)
+        return np.where(count >= 2, (dk * dd).sum(axis=1) / (dk**2).sum(axis=1), np.nan)
 
 
 def _secant(f, ts, i_out, i_in):

@@ -24,7 +24,11 @@ hangs below the jaws. It is still lifted if, hanging, it clears the table: its e
 beyond the grasp axis on the side of its centre of mass is less than the lift height
 plus the height of the axis above the table. Otherwise the turn puts it back on the
 table (``weight_torque``). A weight beyond the plates' friction slides it out
-(``weight_slip``).
+(``weight_slip``). A plate that presses the wall with its edge (a wall inclined to the
+plate: harness.grasp.edge_contacts) does not let the object turn and hang: as the
+object turns, the wall's distance from the plate's edge varies along the edge, the
+pressure goes to one end of it, and the object swings on two points and is lost
+(``edge_turn``; docs/lift.md, "Edge contacts").
 """
 
 from __future__ import annotations
@@ -38,8 +42,8 @@ from scipy.special import ndtr
 from harness.settings import GRAVITY, GraspSettings
 
 #: Failure reasons of the lift, in the order a draw in force closure is classified.
-LIFT_REASONS = ("weight_slip", "weight_torque")
-SLIP, TORQUE = 0, 1
+LIFT_REASONS = ("weight_slip", "weight_torque", "edge_turn")
+SLIP, TORQUE, EDGE_TURN = 0, 1, 2
 #: The jaw plates end this far above the table (harness.physics.gripper.TABLE_CLEARANCE).
 PLATE_CLEARANCE = 0.001
 
@@ -108,7 +112,7 @@ class LiftVerdict:
     P_L with less variance than the verdicts' share); and the quantities the verdict was
     made of: the weight (N), the centre of mass's distance from the contact line (m), the
     torque demand T (m; NaN where the weight slides the object out), the drawn lever sum
-    kappa_1 + kappa_2 and its largest value (m)."""
+    kappa_1 + kappa_2 and its largest value (m), and whether a plate presses with its edge."""
 
     lifted: np.ndarray
     reason: np.ndarray
@@ -119,18 +123,22 @@ class LiftVerdict:
     demand: np.ndarray
     lever: np.ndarray
     largest_lever: np.ndarray
+    edge: np.ndarray
 
 
-def judge(c1, c2, w1, w2, area, com, reach, friction, pressure, settings: GraspSettings) -> LiftVerdict:
+def judge(c1, c2, w1, w2, area, com, reach, friction, pressure, settings: GraspSettings, edge=None) -> LiftVerdict:
     """The lift of B draws in force closure.
 
     c1, c2 (B, 2): contacts; w1, w2 (B,): the plates' patch widths along the outline;
     area (B,) and com (B, 2): the draw's region area (m^2) and centre of mass;
     reach (B,): the region's extent beyond the line c1-c2 on its centre of mass's side;
     friction (B,): the draw's coefficient; pressure (B, 2): uniform deviates in [0, 1)
-    placing each plate's lever in its admissible range.
+    placing each plate's lever in its admissible range; edge (B,): whether either plate
+    presses the wall with its edge (harness.grasp.edge_contacts; default none): a turned
+    object is then not lifted, whatever its hang (``edge_turn``).
     """
     weight = weight_of(area, settings)
+    edge = np.zeros(len(weight), dtype=bool) if edge is None else np.asarray(edge, dtype=bool)
     distance = line_distance(com, c1, c2)
     demand = torque_demand(weight, distance, friction, settings)
     height = patch_height(settings)
@@ -142,9 +150,10 @@ def judge(c1, c2, w1, w2, area, com, reach, friction, pressure, settings: GraspS
     reason = np.full(len(weight), -1, dtype=np.int8)
     reason[slip] = SLIP
     reason[pivots & ~hangs_clear] = TORQUE
+    reason[pivots & hangs_clear & edge] = EDGE_TURN
     hold = hold_probability(demand, *largest)
-    return LiftVerdict(reason < 0, reason, pivots, np.where(slip, 0.0, np.where(hangs_clear, 1.0, hold)), weight,
-                       distance, demand, lever, largest[0] + largest[1])
+    return LiftVerdict(reason < 0, reason, pivots, np.where(slip, 0.0, np.where(hangs_clear & ~edge, 1.0, hold)),
+                       weight, distance, demand, lever, largest[0] + largest[1], edge)
 
 
 def line_distance(point, c1, c2) -> np.ndarray:
@@ -164,17 +173,21 @@ def side_normal(point, c1, c2) -> np.ndarray:
     return n * np.where(side == 0, 1.0, side)[:, None]
 
 
-def smooth_lift(distance, distance_sd, weight, friction, w1, w2, reach, reach_scale, settings: GraspSettings):
+def smooth_lift(distance, distance_sd, weight, friction, w1, w2, reach, reach_scale, settings: GraspSettings,
+                edge=None):
     """A smooth lift probability for surrogates: the hold probability averaged over a
     Gaussian centre-of-mass distance (mean ``distance``, std ``distance_sd``; 3-point
     Gauss-Hermite), and, where the plates do not hold, the probability that the object
-    hangs clear, Phi((clearance - reach) / reach_scale)."""
+    hangs clear, Phi((clearance - reach) / reach_scale), unless a plate presses with its
+    edge (``edge``, (B,) bool: the turned object is lost, as in :func:`judge`)."""
     height = patch_height(settings)
     l1, l2 = largest_lever(w1, height), largest_lever(w2, height)
     nodes, weights = (-math.sqrt(3.0), 0.0, math.sqrt(3.0)), (1 / 6, 2 / 3, 1 / 6)
     hold = sum(w * hold_probability(torque_demand(weight, np.abs(distance + z * distance_sd), friction, settings),
                                     l1, l2) for z, w in zip(nodes, weights))
     clear = ndtr((clearance(settings) - reach) / reach_scale)
+    if edge is not None:
+        clear = np.where(edge, 0.0, clear)
     slides = np.isnan(torque_demand(weight, 0.0, friction, settings))
     return np.where(slides, 0.0, hold + (1.0 - hold) * clear)
 
@@ -211,15 +224,17 @@ class MassBelief:
         return cls(float(weight_of(regions.area[found].mean(), settings)), com.mean(axis=0), cov,
                    belief.mean_field.regions.hull[0])
 
-    def margin(self, c1, c2, w1, w2, friction, settings: GraspSettings, reach_scale: float) -> np.ndarray:
-        """The smooth lift probability (B,) of grasps with contacts c1, c2 (B, 2) and patch
-        widths w1, w2 (B,): :func:`smooth_lift` with the centre of mass's distance from
-        the contact line, its std across the line (from the covariance), and the hull's
-        reach beyond the line on the centre of mass's side."""
+    def margin(self, c1, c2, w1, w2, friction, settings: GraspSettings, reach_scale: float,
+               edge=None) -> np.ndarray:
+        """The smooth lift probability (B,) of grasps with contacts c1, c2 (B, 2), patch
+        widths w1, w2 (B,) and edge contacts ``edge`` (B,: either plate; default none):
+        :func:`smooth_lift` with the centre of mass's distance from the contact line, its
+        std across the line (from the covariance), and the hull's reach beyond the line on
+        the centre of mass's side."""
         c1, c2 = np.asarray(c1, dtype=float), np.asarray(c2, dtype=float)
         com = np.broadcast_to(self.com, c1.shape)
         normal = side_normal(com, c1, c2)
         distance_sd = np.sqrt(np.maximum(np.einsum("bi,ij,bj->b", normal, self.com_cov, normal), 0.0))
         reach = (np.einsum("vk,bk->bv", self.hull, normal) - np.einsum("bk,bk->b", c1, normal)[:, None]).max(axis=1)
         return smooth_lift(line_distance(com, c1, c2), distance_sd, self.weight, friction, w1, w2, reach,
-                           reach_scale, settings)
+                           reach_scale, settings, edge)

@@ -229,10 +229,11 @@ class DrawOutcomes:
 #: lever), the lever sum the draw's pressure deviates give (m) and its largest value (the
 #: two half-diagonals, m), the reach beyond the contact line on the centre of mass's side
 #: (m), the hang's gap to the lifted table (clearance - reach, m: positive hangs clear),
-#: the friction coefficient and each plate's share of its friction carried as force,
-#: u = lambda W / (2 mu N).
+#: the friction coefficient, each plate's share of its friction carried as force,
+#: u = lambda W / (2 mu N), and whether a plate presses its wall with its edge (1 or 0;
+#: harness.grasp.edge_contacts).
 LIFT_INPUTS = ("weight", "distance", "demand", "lever_sum", "largest_lever_sum", "reach", "hang_gap", "friction",
-               "load_share")
+               "load_share", "edge")
 
 
 def evaluate_draws(grasps, draws: EvaluationDraws, settings: GraspSettings, lift: bool = True,
@@ -315,7 +316,7 @@ def _judge(g1, g2, field, draws: EvaluationDraws, settings: GraspSettings, lift:
         c1, c2, com = settled.c1[held], settled.c2[held], regions.center_of_mass[f]
         reach = regions.extent(f, c1, side_normal(com, c1, c2))
         verdict = judge(c1, c2, settled.w1[held], settled.w2[held], regions.area[f], com, reach, gamma[held],
-                        draws.pressure[f], settings)
+                        draws.pressure[f], settings, settled.edge1[held] | settled.edge2[held])
         lifted[held], pivots[held], chance[held] = verdict.lifted, verdict.pivots, verdict.chance
         reason[np.flatnonzero(held)[~verdict.lifted]] = len(PLANAR_REASONS) + verdict.reason[~verdict.lifted]
     inputs = None
@@ -341,7 +342,8 @@ def _lift_inputs(verdict, reach, friction, settings: GraspSettings) -> dict:
     return {"weight": verdict.weight, "distance": verdict.distance, "demand": verdict.demand,
             "lever_sum": verdict.lever, "largest_lever_sum": verdict.largest_lever, "reach": reach,
             "hang_gap": clearance(settings) - reach, "friction": friction,
-            "load_share": settings.load_factor * verdict.weight / (2.0 * friction * settings.force)}
+            "load_share": settings.load_factor * verdict.weight / (2.0 * friction * settings.force),
+            "edge": verdict.edge.astype(float)}
 
 
 def _on_bodies(g1, g2, field, draws: EvaluationDraws, contacts: Contacts, closure, gamma, settings: GraspSettings):

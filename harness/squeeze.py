@@ -28,7 +28,7 @@ SQUEEZE_MARGIN = 0.003
 class Squeeze:
     """Per draw (B,): whether the squeeze brought the plates into force closure, the turn
     (rad, 0 where it did not) and the contacts where it stopped (the first contacts
-    for draws in closure at once, or not squeezed into it): c1, c2, w1, w2."""
+    for draws in closure at once, or not squeezed into it): c1, c2, w1, w2, edge1, edge2."""
 
     squeezed: np.ndarray
     turn: np.ndarray
@@ -36,6 +36,12 @@ class Squeeze:
     c2: np.ndarray
     w1: np.ndarray
     w2: np.ndarray
+    edge1: np.ndarray
+    edge2: np.ndarray
+
+
+#: The contacts' fields a Squeeze keeps where it stopped.
+_KEPT = ("c1", "c2", "w1", "w2", "edge1", "edge2")
 
 
 def squeeze(fields: SDFBatch, g1, g2, field_index, contacts: Contacts, closure, friction, jaw_width: float,
@@ -60,8 +66,7 @@ def squeeze(fields: SDFBatch, g1, g2, field_index, contacts: Contacts, closure, 
     field_index = np.broadcast_to(np.asarray(field_index, dtype=np.int64), (b,))
     friction = np.broadcast_to(np.asarray(friction, dtype=float), (b,))
     com = fields.regions.center_of_mass[field_index]
-    out = Squeeze(np.zeros(b, dtype=bool), np.zeros(b), contacts.c1.copy(), contacts.c2.copy(), contacts.w1.copy(),
-                  contacts.w2.copy())
+    out = Squeeze(np.zeros(b, dtype=bool), np.zeros(b), *(getattr(contacts, name).copy() for name in _KEPT))
     turning = _couple(*_pushes(contacts), g1, g2)
     active = (contacts.status == OK) & ~np.asarray(closure, dtype=bool) & (turning != 0) & np.isfinite(com[:, 0])
     last1, last2 = contacts.c1.copy(), contacts.c2.copy()
@@ -85,7 +90,7 @@ def squeeze(fields: SDFBatch, g1, g2, field_index, contacts: Contacts, closure, 
         done = idx[closed]
         out.squeezed[done] = True
         out.turn[done] = angle
-        for name in ("c1", "c2", "w1", "w2"):
+        for name in _KEPT:
             getattr(out, name)[done] = getattr(found, name)[closed]
         active[idx[closed | lost | reversed_]] = False
     return out

@@ -220,8 +220,8 @@ class SurrogateObjective:
         return (width <= self.settings.opening) & (np.abs(jaws) < half).all(axis=(1, 2)) & np.isfinite(width)
 
     def _evaluate(self, x):
-        """Contacts of every sigma point: c1, c2, n1, n2 (R, 9, 2), ok (R, 9) and the patch
-        widths w1, w2 (R, 9)."""
+        """Contacts of every sigma point: c1, c2, n1, n2 (R, 9, 2), ok (R, 9), the patch
+        widths w1, w2 (R, 9) and whether either plate presses with its edge (R, 9)."""
         jaws = self.jaw_starts(x)
         g1, g2 = jaws[:, 0], jaws[:, 1]
         d = g2 - g1
@@ -232,12 +232,13 @@ class SurrogateObjective:
         c = find_contacts(self.mean, s1, s2, self.settings.jaw_width, field_index=np.zeros(len(s1), dtype=np.int64))
         r = len(x)
         return (c.c1.reshape(r, -1, 2), c.c2.reshape(r, -1, 2), c.n1.reshape(r, -1, 2), c.n2.reshape(r, -1, 2),
-                (c.status == OK).reshape(r, -1), c.w1.reshape(r, -1), c.w2.reshape(r, -1))
+                (c.status == OK).reshape(r, -1), c.w1.reshape(r, -1), c.w2.reshape(r, -1),
+                (c.edge1 | c.edge2).reshape(r, -1))
 
     def _terms(self, x) -> dict:
         """The objective's and constraints' parts at rows x (see the class docstring)."""
         r = len(x)
-        c1, c2, n1, n2, ok, w1, w2 = self._evaluate(x)
+        c1, c2, n1, n2, ok, w1, w2, edge = self._evaluate(x)
         line = c2 - c1
         line /= np.maximum(np.linalg.norm(line, axis=-1, keepdims=True), 1e-12)
         a1 = np.arccos(np.clip(-np.einsum("rsk,rsk->rs", n1, line), -1.0, 1.0))
@@ -258,7 +259,7 @@ class SurrogateObjective:
         if self.mass is not None:
             lift = np.zeros(ok.shape)
             lift[ok] = self.mass.margin(c1[ok], c2[ok], w1[ok], w2[ok], self.settings.friction, self.settings,
-                                        self.h)
+                                        self.h, edge[ok])
             hold = hold * lift
         return {
             "quality": np.where(ok, hold, 0.0) @ _W,

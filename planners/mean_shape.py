@@ -48,5 +48,5 @@ class MeanShape(Planner):
         held = closed | settled.squeezed
         lift = np.zeros(len(grasps))
         lift[held] = mass.margin(settled.c1[held], settled.c2[held], settled.w1[held], settled.w2[held],
-                                 settings.friction, settings, belief.grid.cell)
+                                 settings.friction, settings, belief.grid.cell, (settled.edge1 | settled.edge2)[held])
         return lift, quality

@@ -77,7 +77,7 @@ def test_quality_json_holds_the_estimate_its_interval_and_failures(capsys):
     assert out["p_l_ci_low"] <= out["p_l"] <= out["p_l_ci_high"]
     assert out["p_l"] <= out["p_f"] + out["squeezed"] / 300
     planar = ("too_wide", "missed", "degenerate_normal", "friction_cone")
-    assert set(out["failures"]) == set(planar) | {"weight_slip", "weight_torque"}
+    assert set(out["failures"]) == set(planar) | {"weight_slip", "weight_torque", "edge_turn"}
     # P_F loses the planar reasons' draws and those the plates' squeeze brought into closure.
     assert round(out["p_f"] * 300) + sum(out["failures"][k] for k in planar) + out["squeezed"] == 300
     assert round(out["p_l"] * 300) + sum(out["failures"].values()) == 300

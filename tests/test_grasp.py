@@ -11,8 +11,8 @@ from scipy.optimize import linprog
 
 from harness.belief import build_belief
 from harness.geometry import Grid
-from harness.grasp import (DEGENERATE, MISSED, OK, PLATE_LINES, TOO_WIDE, Grasp, SDFBatch, contact_wrenches,
-                           ferrari_canny, find_contacts, force_closure, plate_closure)
+from harness.grasp import (DEGENERATE, MISSED, OK, PATCH_DEPTH, PLATE_LINES, TOO_WIDE, Grasp, SDFBatch,
+                           contact_wrenches, edge_contacts, ferrari_canny, find_contacts, force_closure, plate_closure)
 from harness.scene import load_scene
 from harness.seeding import stream
 
@@ -453,3 +453,80 @@ def test_the_lift_is_judged_on_the_body_alone():
     assert both.lift_chance[1, 0] == pytest.approx(alone.lift_chance[1, 0], abs=1e-9)
     np.testing.assert_array_equal(both.lifted[2], alone.lifted[2])
     assert both.lift_chance[2, 0] == pytest.approx(alone.lift_chance[2, 0], abs=1e-9)
+
+
+# -- edge contacts: a plate pressing an inclined wall with its edge ------------------------------
+
+
+def test_edge_contacts_follow_the_walls_profile_across_the_plate():
+    """Depths beyond the first contact per plate line (2.5 mm apart): a wall inclined so
+    that it leaves the plate by more than PATCH_DEPTH over the plate is pressed by the
+    edge it meets; a curved wall is, when its closest approach (the quadratic's vertex)
+    lies at or beyond that edge, and not when it lies on the plate."""
+    spacing = JAW / (PLATE_LINES - 1)
+    s = np.arange(PLATE_LINES) * spacing
+    slope = 1.5 * PATCH_DEPTH / JAW
+    curve = 1 / (2 * 0.015)  # a 15 mm radius: depth (s - vertex)^2 / (2 r)
+    rows = {
+        "inclined, from line 0": (slope * s, 0, True),
+        "inclined, from the last line": (slope * s[::-1], PLATE_LINES - 1, True),
+        "barely inclined (within PATCH_DEPTH over the plate)": (0.5 * slope * s, 0, False),
+        "flat": (np.zeros(PLATE_LINES), 0, False),
+        "curved, vertex 1 mm beyond the edge": (curve * ((s + 0.001) ** 2 - 0.001 ** 2), 0, True),
+        "curved, vertex 1 mm inside the plate": (curve * ((s - 0.001) ** 2 - 0.001 ** 2) + curve * 0.001 ** 2, 0,
+                                                 False),
+        "first contact on an inner line": (slope * np.abs(s - s[1]), 1, False),
+        "the next line misses": (np.r_[0.0, np.inf, np.inf, np.inf, np.inf], 0, False),
+        "only the far line misses": (np.r_[slope * s[:-1], np.inf], 0, True),
+    }
+    depth = np.array([d - d[first] for d, first, _ in rows.values()])
+    first = np.array([first for _, first, _ in rows.values()])
+    expected = [e for _, _, e in rows.values()]
+    assert edge_contacts(depth, first).tolist() == expected
+
+
+def _half_planes(grid, planes):
+    """max_i (n_i . p - d_i) / |n_i| over the half-planes n_i . p <= d_i: the exact SDF of a convex polygon wherever a
+    face is the nearest feature (outside near its faces, and inside), and its gradient."""
+    p = grid.points
+    normals = np.array([n for n, _ in planes], dtype=float)
+    norms = np.linalg.norm(normals, axis=1)
+    normals /= norms[:, None]
+    values = p @ normals.T - np.array([d for _, d in planes]) / norms
+    k = np.argmax(values, axis=1)
+    m = grid.size
+    return values.max(axis=1).reshape(m, m), normals[k].reshape(m, m, 2)
+
+
+@pytest.mark.parametrize("slopes, tilt_deg, expected", [
+    ((0.1, 0.1), 0.0, (True, True)),      # a wedge: both walls recede 1 mm across the plate
+    ((0.03, 0.03), 0.0, (False, False)),  # 0.3 mm: within PATCH_DEPTH, the pads take it up
+    ((0.0, 0.1), 0.0, (False, True)),     # one wall inclined, the other square to the plates
+    ((0.0, 0.0), 5.0, (False, False)),    # parallel walls, plates tilted 5 degrees: turned flush
+])
+def test_plates_press_a_wedge_with_their_edges_and_parallel_walls_with_their_faces(slopes, tilt_deg, expected):
+    """A head 30 mm wide between walls y = -(15 mm + t1 x) and y = 15 mm + t2 x, closed on
+    along y (turned by ``tilt``) across x = 0: an inclined wall touches the 10 mm plate at
+    the edge towards which it approaches, unless the two walls are parallel (however
+    inclined to the plates), which the closing plates turn flush."""
+    t1, t2 = slopes
+    grid = Grid(81, 0.2)
+    field = SDFBatch(grid, *_half_planes(grid, [((-t1, -1.0), 0.015), ((-t2, 1.0), 0.015),
+                                                ((1.0, 0.0), 0.03), ((-1.0, 0.0), 0.03)]))
+    a = math.radians(tilt_deg)
+    u = np.array([math.sin(a), math.cos(a)])
+    c = find_contacts(field, [-0.04 * u], [0.04 * u], JAW)
+    assert c.status[0] == OK
+    assert (bool(c.edge1[0]), bool(c.edge2[0])) == expected
+
+
+@pytest.mark.parametrize("offset, expected", [(0.0, False), (0.003, False), (0.008, True)])
+def test_a_curved_wall_is_pressed_by_the_plates_edge_only_when_its_tangent_point_lies_beyond_it(offset, expected):
+    """A 15 mm disk gripped across, the grasp line ``offset`` from its centre: the walls'
+    closest approach to the plates lies at that offset across each 10 mm plate, on it up to
+    5 mm, beyond its edge after."""
+    grid = Grid(81, 0.2)
+    field = SDFBatch(grid, *disk_field(grid, 0.015))
+    c = find_contacts(field, [[offset, -0.04]], [[offset, 0.04]], JAW)
+    assert c.status[0] == OK
+    assert bool(c.edge1[0]) == expected and bool(c.edge2[0]) == expected

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from harness.grasp import PATCH_DEPTH, SDFBatch, find_contacts
-from harness.lift import (PLATE_CLEARANCE, axis_height, hold_probability, judge, largest_lever, patch_height,
-                          smooth_lift, torque_demand)
+from harness.lift import (LIFT_REASONS, PLATE_CLEARANCE, axis_height, clearance, hold_probability, judge,
+                          largest_lever, patch_height, smooth_lift, torque_demand)
 from harness.quality import FAILURE_REASONS, EvaluationDraws, evaluate_draws
 from harness.scene import load_scene
 from harness.settings import GRAVITY, resolve
@@ -124,17 +124,41 @@ def test_a_turning_object_is_lifted_only_if_it_hangs_clear_of_the_table():
     when its reach beyond the grasp axis is below the lift height plus the axis height."""
     scene = load_scene("rectangle")
     settings = resolve(scene)
-    clearance = settings.lift_height + axis_height(settings)
+    clear = settings.lift_height + axis_height(settings)
     assert axis_height(settings) == pytest.approx(PLATE_CLEARANCE + 0.5 * patch_height(settings))
     assert patch_height(settings) == pytest.approx(settings.thickness - PLATE_CLEARANCE)
     c1, c2 = np.array([[0.0, -0.015]] * 2), np.array([[0.0, 0.015]] * 2)
     com = np.array([[0.03, 0.0]] * 2)
-    reach = np.array([clearance - 1e-4, clearance + 1e-4])
+    reach = np.array([clear - 1e-4, clear + 1e-4])
     verdict = judge(c1, c2, np.full(2, 0.01), np.full(2, 0.01), np.full(2, RECTANGLE_AREA), com, reach,
                     np.full(2, 0.5), np.zeros((2, 2)), settings)
     assert verdict.pivots.all()
     assert verdict.lifted.tolist() == [True, False]
     assert verdict.reason.tolist() == [-1, 1]
+
+
+def test_a_turning_object_pressed_by_a_plates_edge_is_not_lifted_however_clear_its_hang():
+    """The same draws as above with a plate pressing its wall with its edge: turned, the
+    object is lost whatever its hang (edge_turn, and the smooth chance falls to the hold
+    probability); held level by its levers, it is lifted as before."""
+    scene = load_scene("rectangle")
+    settings = resolve(scene)
+    clear = settings.lift_height + axis_height(settings)
+    c1, c2 = np.array([[0.0, -0.015]] * 3), np.array([[0.0, 0.015]] * 3)
+    com = np.array([[0.03, 0.0], [0.03, 0.0], [1e-4, 0.0]])
+    reach = np.array([clear - 1e-4, clear + 1e-4, clear - 1e-4])
+    pressure = np.array([[0.0, 0.0], [0.0, 0.0], [1.0, 1.0]])
+    args = (c1, c2, np.full(3, 0.01), np.full(3, 0.01), np.full(3, RECTANGLE_AREA), com, reach, np.full(3, 0.5),
+            pressure, settings)
+    plain, edged = judge(*args), judge(*args, edge=np.ones(3, dtype=bool))
+    assert plain.pivots.tolist() == edged.pivots.tolist() == [True, True, False]
+    assert plain.lifted.tolist() == [True, False, True]
+    assert edged.lifted.tolist() == [False, False, True]
+    assert [LIFT_REASONS[r] if r >= 0 else None for r in edged.reason] == ["edge_turn", "weight_torque", None]
+    assert edged.edge.all() and not plain.edge.any()
+    hold = hold_probability(plain.demand, plain.largest_lever / 2, plain.largest_lever / 2)
+    np.testing.assert_allclose(edged.chance, hold)
+    assert plain.chance[0] == 1.0
 
 
 @pytest.mark.parametrize("gap, lifted", [(0.0125, 1.0), (-0.0125, 0.0)])
@@ -184,6 +208,26 @@ def test_a_handle_on_a_curved_wall_is_lifted_exactly_while_its_far_end_clears_th
     assert scene.physics.density * scene.shape.area * scene.physics.thickness == pytest.approx(0.4, rel=1e-6)
     assert result.pivots.mean() == 1.0
     assert result.lifted.mean() == lifted
+
+
+def test_a_wedge_the_weight_turns_is_lost_where_a_square_head_hangs_clear():
+    """bench lift's wedge with a handle (600 g at 10 N, so that the weight turns it on every
+    draw), its hang 2.4 cm clear of the lifted table: with walls at a slope of 0.1 the
+    plates press them with their edges and the turned wedge is lost (edge_turn, P_L 0); the
+    same head with square walls hangs clear (P_L 1)."""
+    from harness.bench.lift_study import SIGMA_G, HangWedge, _exact_draws
+
+    for slope, p_l in ((0.1, 0.0), (0.0, 1.0)):
+        wedge = HangWedge(0.6, 0.5, 10.0, slope)
+        scene = wedge.scene(0.07)
+        settings, _, draws = _exact_draws(scene, 200, 1, "wedge test")
+        assert settings.sigma_g == SIGMA_G
+        assert clearance(settings) - wedge.reach(0.07) > 0.02
+        result = evaluate_draws(wedge.grasp(0.07), draws, settings)
+        assert result.pivots.mean() == 1.0
+        assert result.lifted.mean() == p_l
+        if slope:
+            assert (result.reason == FAILURE_REASONS.index("edge_turn")).all()
 
 
 def test_a_lifted_draw_is_in_force_closure_or_squeezed_into_it_and_the_reasons_partition_the_draws():

@@ -251,8 +251,87 @@ class HangHandle:
 
 #: The handle's lengths (m): from a hang about 6 cm clear of the lifted table to 3 cm into it.
 HANDLE_LENGTHS = tuple(np.round(np.arange(0.05, 0.1451, 0.005), 3))
-#: The hang cases of bench lift: the two bars and the heavy handle (400 g at 10 N, as the heavy bar).
-HANG_CASES = HANG_BARS + (HangHandle(0.4, 0.5, 10.0),)
+
+
+@dataclass(frozen=True)
+class HangWedge:
+    """The hang test on edge contacts: a head between two walls inclined to the plates
+    (slope ``slope`` each, widening towards the handle with ``sense`` +1, away from it
+    with -1; ``square`` keeps the first wall square to the plates), gripped across its
+    middle, with a straight handle (a capsule) of growing length whose weight turns it;
+    the mass is kept by the density. The plates meet an inclined wall with the edge
+    towards which it approaches (harness.grasp.edge_contacts), and the far end reaches
+    head + length + half_width beyond the grasp axis."""
+
+    mass: float
+    friction: float
+    force: float
+    slope: float
+    sense: int = 1
+    square: bool = False
+    half: float = 0.015
+    head: float = 0.015
+    half_width: float = 0.006
+    thickness: float = 0.03
+
+    @property
+    def label(self) -> str:
+        walls = "one wall" if self.square else "walls"
+        towards = "towards" if self.sense > 0 else "away from"
+        return (f"{self.mass * 1e3:g} g wedge + handle, {walls} {self.slope:g} wider {towards} it, "
+                f"{self.thickness * 100:g} cm thick, mu {self.friction:g}, {self.force:g} N")
+
+    @property
+    def lengths(self) -> tuple:
+        return WEDGE_LENGTHS
+
+    def _outline(self) -> list:
+        t, h, b = self.sense * self.slope, self.head, self.half
+        t1 = 0.0 if self.square else t
+        return [(-h, -(b - h * t1)), (h, -(b + h * t1)), (h, b + h * t), (-h, b - h * t)]
+
+    def _shape(self, length: float):
+        import shapely
+        from shapely.geometry import LineString, Polygon
+
+        handle = LineString([(self.head, 0), (self.head + length, 0)]).buffer(self.half_width, quad_segs=32)
+        return shapely.union_all([Polygon(self._outline()), handle])
+
+    def _centre(self, length: float) -> float:
+        """Where the head's middle lies (x, m) once the shape is centred on the grid."""
+        return -0.5 * (length + self.half_width)
+
+    def scene(self, length: float) -> Scene:
+        shape = {"type": "union", "offset": [self._centre(length), 0.0],
+                 "parts": [{"type": "polygon", "exterior": [list(p) for p in self._outline()]},
+                           {"type": "capsule", "start": [self.head, 0.0], "end": [self.head + length, 0.0],
+                            "radius": self.half_width}]}
+        density = self.mass / (self._shape(length).area * self.thickness)
+        return _solid("wedge", shape, self.thickness, density, self.friction, self.force,
+                      f"<wedge {self.label}, {length * 100:g} cm>")
+
+    def grasp(self, length: float) -> np.ndarray:
+        half = self.half + self.head * self.slope + CLEARANCE
+        x = self._centre(length)
+        return np.array([[x, -half], [x, half]])
+
+    def reach(self, length: float) -> float:
+        return self.head + length + self.half_width
+
+    def com_offset(self, length: float) -> float:
+        return self._shape(length).centroid.x
+
+
+#: The wedges' lengths (m): from a hang about 5.5 cm clear of the lifted table to 1.5 cm into it.
+WEDGE_LENGTHS = tuple(np.round(np.arange(0.04, 0.1101, 0.005), 3))
+#: Wedges whose inclined walls the plates press with their edges (300 g at 10 N, walls at
+#: a slope of 0.1, 5.7 degrees): widening towards the handle, away from it, and one wall
+#: inclined, the other square.
+HANG_WEDGES = (HangWedge(0.3, 0.5, 10.0, 0.1, 1), HangWedge(0.3, 0.5, 10.0, 0.1, -1),
+               HangWedge(0.3, 0.5, 10.0, 0.1, 1, square=True))
+#: The hang cases of bench lift: the two bars, the heavy handle (400 g at 10 N, as the heavy
+#: bar) and the wedges.
+HANG_CASES = HANG_BARS + (HangHandle(0.4, 0.5, 10.0),) + HANG_WEDGES
 #: A turned bar held at a smaller angle than this (rad) has come to rest short of the hang.
 AT_REST = 1.4
 #: Hang bars whose hang the model calls at least this clear of the lifted table (m) should all be held.
@@ -285,9 +364,12 @@ def hang_sweep(hang: "HangBar | HangHandle", trials: int = 12, seed: int = 0, ru
             analytic = evaluate_draws(grasp, draws, settings)
             held = [r for r in results if r.outcome == "success" and r.pivot > TURNED]
             slides = [settings.lift_height - r.rise - d * math.sin(r.pivot) for r in held if r.pivot < AT_REST]
+            turned = [r for r in results if r.pivot > TURNED]
             rows.append({"length": length, "offset": d, "gap": clearance(settings) - hang.reach(length),
                          "success": float(np.mean([r.outcome == "success" for r in results])),
                          "turned": float(np.mean([r.pivot > TURNED for r in results])),
+                         "turned_trials": len(turned),
+                         "turned_successes": sum(r.outcome == "success" for r in turned),
                          "p_l": float(analytic.lifted.mean()), "turns": float(analytic.pivots.mean()),
                          "outcomes": dict(Counter(r.outcome for r in results)),
                          "held_turn_median": float(np.median([r.pivot for r in held])) if held else None,
@@ -325,6 +407,10 @@ def hang_validate(bars=HANG_CASES, trials: int = 12, seed: int = 0, engine: str 
             rows.append({"bar": hang.label, "success_gap": sim, "p_l_gap": model,
                          "difference": None if sim is None or model is None else sim - model,
                          "clear_success": float(np.mean([p["success"] for p in clear])) if clear else None,
+                         "clear_p_l": float(np.mean([p["p_l"] for p in clear])) if clear else None,
+                         "clear_turned": sum(p["turned_trials"] for p in clear),
+                         "clear_turned_success": (sum(p["turned_successes"] for p in clear)
+                                                  / max(1, sum(p["turned_trials"] for p in clear))),
                          "clear_failures": dict(failed), "points": points})
     return {"engine": engine, "time_step": protocol.time_step, "trials_per_length": trials, "rows": rows}
 
@@ -493,16 +579,21 @@ def _hang_lines(res: dict) -> list[str]:
     def cm(v):
         return "never" if v is None else f"{round(v * 100, 1) + 0.0:+.1f}"  # + 0.0: no "-0.0"
 
-    lines = [f"hang cases ({res['engine']}, step {res['time_step'] * 1e3:.3g} ms): bars and a disk with a handle "
-             f"that the weight turns, "
-             f"{len(HANG_LENGTHS)} lengths ({len(HANDLE_LENGTHS)} for the handle), "
-             f"{res['trials_per_length']} trials each; the gap (cm) between the model's hang and the lifted "
-             f"table where success and P_L fall through 0.5, and the success of bars hanging "
-             f"{CLEAR_GAP * 100:g} cm clear or more",
-             f"{'bar':<58} {'P_L':>6} {'success':>8} {'diff':>6}  {'clear':>5}  failures"]
+    def share(v):
+        return "-" if v is None else f"{v:.2f}"
+
+    lines = [f"hang cases ({res['engine']}, step {res['time_step'] * 1e3:.3g} ms): bars, a disk and wedges with a "
+             f"handle that the weight turns, "
+             f"{len(HANG_LENGTHS)} lengths ({len(HANDLE_LENGTHS)} for the handle, {len(WEDGE_LENGTHS)} for the "
+             f"wedges), {res['trials_per_length']} trials each; the gap (cm) between the model's hang and the lifted "
+             f"table where success and P_L fall through 0.5, and of the lengths whose hang the model calls "
+             f"{CLEAR_GAP * 100:g} cm clear or more: the success, the mean P_L and the success of the trials "
+             f"that turned (how many turned)",
+             f"{'case':<70} {'P_L':>6} {'success':>8} {'diff':>6}  {'clear':>5}  {'P_L':>5}  {'turned':>10}  "
+             f"failures"]
     for r in res["rows"]:
-        clear = "-" if r["clear_success"] is None else f"{r['clear_success']:.2f}"
         fails = ", ".join(f"{k} {v}" for k, v in sorted(r["clear_failures"].items())) or "none"
-        lines.append(f"{r['bar']:<58} {cm(r['p_l_gap']):>6} {cm(r['success_gap']):>8} {cm(r['difference']):>6}"
-                     f"  {clear:>5}  {fails}")
+        turned = "-" if not r.get("clear_turned") else f"{r['clear_turned_success']:.2f} ({r['clear_turned']})"
+        lines.append(f"{r['bar']:<70} {cm(r['p_l_gap']):>6} {cm(r['success_gap']):>8} {cm(r['difference']):>6}"
+                     f"  {share(r['clear_success']):>5}  {share(r.get('clear_p_l')):>5}  {turned:>10}  {fails}")
     return lines
