@@ -168,7 +168,7 @@ class HangBar:
     def offset(self, length: float) -> float:
         return 0.5 * length - self.short
 
-    # What hang_sweep asks of a hang case (HangBar and HangHandle alike).
+    # What hang_sweep asks of a hang case (HangBar and the head-and-handle cases alike).
 
     @property
     def lengths(self) -> tuple:
@@ -195,13 +195,54 @@ HANG_LENGTHS = tuple(np.round(np.arange(0.06, 0.1751, 0.005), 3))
 HANG_BARS = (HangBar(0.4, 0.5, 10.0), HangBar(0.1, 0.5, 3.0))
 
 
+class _HeadAndHandle:
+    """A hang case made of a head gripped across at x = 0 and a straight handle (a capsule
+    of half width ``half_width``) from x = ``neck`` to ``neck`` + length, whose weight turns
+    it in the plates; the mass is kept by the density. The far end reaches neck + length
+    + half_width beyond the grasp axis. Subclasses give the head (its scene part and its
+    geometry), how far it reaches behind the axis (``back``) and its half width at the
+    plates (``grip``)."""
+
+    name = ""
+
+    def _head(self) -> tuple[dict, object]:
+        raise NotImplementedError
+
+    def _shape(self, length: float):
+        import shapely
+        from shapely.geometry import LineString
+
+        handle = LineString([(self.neck, 0), (self.neck + length, 0)]).buffer(self.half_width, quad_segs=32)
+        return shapely.union_all([self._head()[1], handle])
+
+    def _centre(self, length: float) -> float:
+        """Where the grasp axis lies (x, m) once the shape is centred on the grid."""
+        return -0.5 * (length + self.half_width + (self.neck - self.back))
+
+    def scene(self, length: float) -> Scene:
+        shape = {"type": "union", "offset": [self._centre(length), 0.0],
+                 "parts": [self._head()[0], {"type": "capsule", "start": [self.neck, 0.0],
+                                             "end": [self.neck + length, 0.0], "radius": self.half_width}]}
+        density = self.mass / (self._shape(length).area * self.thickness)
+        return _solid(self.name, shape, self.thickness, density, self.friction, self.force,
+                      f"<{self.name} {self.label}, {length * 100:g} cm>")
+
+    def grasp(self, length: float) -> np.ndarray:
+        x, half = self._centre(length), self.grip + CLEARANCE
+        return np.array([[x, -half], [x, half]])
+
+    def reach(self, length: float) -> float:
+        return self.neck + length + self.half_width
+
+    def com_offset(self, length: float) -> float:
+        return self._shape(length).centroid.x
+
+
 @dataclass(frozen=True)
-class HangHandle:
-    """The hang test on a curved wall: a disk (``radius``) gripped across its centre,
-    with a straight handle (a capsule of half width ``half_width``) of growing length
-    whose weight turns it in the plates; the mass is kept by the density. The plates
-    touch the disk's curved wall along a line across the thickness (no flat patch), and
-    the far end reaches length + half_width beyond the grasp axis."""
+class HangHandle(_HeadAndHandle):
+    """The hang test on a curved wall: a disk (``radius``) gripped across its centre, with
+    a handle from its centre (:class:`_HeadAndHandle`). The plates touch the disk's curved
+    wall along a line across the thickness (no flat patch)."""
 
     mass: float
     friction: float
@@ -209,6 +250,8 @@ class HangHandle:
     radius: float = 0.015
     half_width: float = 0.006
     thickness: float = 0.03
+    name = "handle"
+    neck = 0.0
 
     @property
     def label(self) -> str:
@@ -219,34 +262,19 @@ class HangHandle:
     def lengths(self) -> tuple:
         return HANDLE_LENGTHS
 
-    def _shape(self, length: float):
-        import shapely
-        from shapely.geometry import LineString, Point
+    @property
+    def back(self) -> float:
+        return self.radius
 
-        return shapely.union_all([Point(0, 0).buffer(self.radius, quad_segs=64),
-                                  LineString([(0, 0), (length, 0)]).buffer(self.half_width, quad_segs=32)])
+    @property
+    def grip(self) -> float:
+        return self.radius
 
-    def _centre(self, length: float) -> float:
-        """Where the disk's centre lies (x, m) once the shape is centred on the grid."""
-        return -0.5 * (length + self.half_width - self.radius)
+    def _head(self) -> tuple[dict, object]:
+        from shapely.geometry import Point
 
-    def scene(self, length: float) -> Scene:
-        shape = {"type": "union", "offset": [self._centre(length), 0.0],
-                 "parts": [{"type": "disk", "radius": self.radius, "center": [0.0, 0.0]},
-                           {"type": "capsule", "start": [0.0, 0.0], "end": [length, 0.0], "radius": self.half_width}]}
-        density = self.mass / (self._shape(length).area * self.thickness)
-        return _solid("handle", shape, self.thickness, density, self.friction, self.force,
-                      f"<handle {self.label}, {length * 100:g} cm>")
-
-    def grasp(self, length: float) -> np.ndarray:
-        x, half = self._centre(length), self.radius + CLEARANCE
-        return np.array([[x, -half], [x, half]])
-
-    def reach(self, length: float) -> float:
-        return length + self.half_width
-
-    def com_offset(self, length: float) -> float:
-        return self._shape(length).centroid.x
+        return ({"type": "disk", "radius": self.radius, "center": [0.0, 0.0]},
+                Point(0, 0).buffer(self.radius, quad_segs=64))
 
 
 #: The handle's lengths (m): from a hang about 6 cm clear of the lifted table to 3 cm into it.
@@ -254,14 +282,13 @@ HANDLE_LENGTHS = tuple(np.round(np.arange(0.05, 0.1451, 0.005), 3))
 
 
 @dataclass(frozen=True)
-class HangWedge:
-    """The hang test on edge contacts: a head between two walls inclined to the plates
-    (slope ``slope`` each, widening towards the handle with ``sense`` +1, away from it
-    with -1; ``square`` keeps the first wall square to the plates), gripped across its
-    middle, with a straight handle (a capsule) of growing length whose weight turns it;
-    the mass is kept by the density. The plates meet an inclined wall with the edge
-    towards which it approaches (harness.grasp.edge_contacts), and the far end reaches
-    head + length + half_width beyond the grasp axis."""
+class HangWedge(_HeadAndHandle):
+    """The hang test on edge contacts: a head ``2 head`` long between two walls inclined
+    to the plates (slope ``slope`` each, widening towards the handle with ``sense`` +1,
+    away from it with -1; ``square`` keeps the first wall square to the plates), ``2 half``
+    wide at the grasp, gripped across its middle, with a handle from its far end
+    (:class:`_HeadAndHandle`). The plates meet an inclined wall with the edge towards
+    which it approaches (harness.grasp.edge_contacts)."""
 
     mass: float
     friction: float
@@ -273,6 +300,7 @@ class HangWedge:
     head: float = 0.015
     half_width: float = 0.006
     thickness: float = 0.03
+    name = "wedge"
 
     @property
     def label(self) -> str:
@@ -285,41 +313,25 @@ class HangWedge:
     def lengths(self) -> tuple:
         return WEDGE_LENGTHS
 
-    def _outline(self) -> list:
+    @property
+    def neck(self) -> float:
+        return self.head
+
+    @property
+    def back(self) -> float:
+        return self.head
+
+    @property
+    def grip(self) -> float:
+        return self.half + self.head * self.slope
+
+    def _head(self) -> tuple[dict, object]:
+        from shapely.geometry import Polygon
+
         t, h, b = self.sense * self.slope, self.head, self.half
         t1 = 0.0 if self.square else t
-        return [(-h, -(b - h * t1)), (h, -(b + h * t1)), (h, b + h * t), (-h, b - h * t)]
-
-    def _shape(self, length: float):
-        import shapely
-        from shapely.geometry import LineString, Polygon
-
-        handle = LineString([(self.head, 0), (self.head + length, 0)]).buffer(self.half_width, quad_segs=32)
-        return shapely.union_all([Polygon(self._outline()), handle])
-
-    def _centre(self, length: float) -> float:
-        """Where the head's middle lies (x, m) once the shape is centred on the grid."""
-        return -0.5 * (length + self.half_width)
-
-    def scene(self, length: float) -> Scene:
-        shape = {"type": "union", "offset": [self._centre(length), 0.0],
-                 "parts": [{"type": "polygon", "exterior": [list(p) for p in self._outline()]},
-                           {"type": "capsule", "start": [self.head, 0.0], "end": [self.head + length, 0.0],
-                            "radius": self.half_width}]}
-        density = self.mass / (self._shape(length).area * self.thickness)
-        return _solid("wedge", shape, self.thickness, density, self.friction, self.force,
-                      f"<wedge {self.label}, {length * 100:g} cm>")
-
-    def grasp(self, length: float) -> np.ndarray:
-        half = self.half + self.head * self.slope + CLEARANCE
-        x = self._centre(length)
-        return np.array([[x, -half], [x, half]])
-
-    def reach(self, length: float) -> float:
-        return self.head + length + self.half_width
-
-    def com_offset(self, length: float) -> float:
-        return self._shape(length).centroid.x
+        outline = [(-h, -(b - h * t1)), (h, -(b + h * t1)), (h, b + h * t), (-h, b - h * t)]
+        return {"type": "polygon", "exterior": [list(p) for p in outline]}, Polygon(outline)
 
 
 #: The wedges' lengths (m): from a hang about 5.5 cm clear of the lifted table to 1.5 cm into it.
@@ -341,7 +353,7 @@ CLEAR_GAP = 0.02
 HANG_FINER = 4
 
 
-def hang_sweep(hang: "HangBar | HangHandle", trials: int = 12, seed: int = 0, runner=None) -> list[dict]:
+def hang_sweep(hang: "HangBar | _HeadAndHandle", trials: int = 12, seed: int = 0, runner=None) -> list[dict]:
     """Per length: the model's gap between the hanging bar and the lifted table
     (clearance - reach, m), simulated success, the share of trials that turned, the
     outcomes, and for the turned trials that ended held the median angle and, of those
