@@ -354,7 +354,8 @@ def _on_bodies(g1, g2, field, draws: EvaluationDraws, contacts: Contacts, closur
     jaw, scale = settings.jaw_width, draws.torque_scale
     on_split = draws.shapes.regions.fragmented[field]
     if not on_split.any():
-        return contacts, closure, squeeze(draws.shapes, g1, g2, field, contacts, closure, gamma, jaw, scale)
+        return contacts, closure, squeeze(draws.shapes, g1, g2, field, contacts, closure, gamma, jaw, scale,
+                                         slide_limit=settings.opening)
     closure = closure.copy()
     pieces = []
     fragmented = np.unique(field[on_split])
@@ -368,8 +369,9 @@ def _on_bodies(g1, g2, field, draws: EvaluationDraws, contacts: Contacts, closur
         contacts = _replace_rows(contacts, rows, on_body)
         closure[rows] = body_closure
         pieces.append((rows, squeeze(bodies, g1[rows], g2[rows], local, on_body, body_closure, gamma[rows], jaw,
-                                     scale)))
-    settled = squeeze(draws.shapes, g1, g2, field, contacts, closure | on_split, gamma, jaw, scale)  # the rest
+                                     scale, slide_limit=settings.opening)))
+    settled = squeeze(draws.shapes, g1, g2, field, contacts, closure | on_split, gamma, jaw, scale,
+                      slide_limit=settings.opening)  # the rest
     for rows, part in pieces:
         settled = _replace_rows(settled, rows, part)
     return contacts, closure, settled

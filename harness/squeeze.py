@@ -1,6 +1,7 @@
 """The plates' squeeze: a draw whose contacts are not in force closure turns on the table
-under the plates' couple until they are (or it cannot), the lift model's planar step
-(docs/lift.md, "The squeeze")."""
+under the plates' couple until they are (or it cannot), and failing that slides across
+the closing line where the walls lean from the plates, the lift model's planar step
+(docs/lift.md, "The squeeze" and "The slide")."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from harness.grasp import OK, Contacts, SDFBatch, find_contacts, plate_closure
+from harness.grasp import OK, PATCH_DEPTH, Contacts, SDFBatch, find_contacts, plate_closure
 
 #: The turn is followed in steps of this angle (rad). With P_L of 1000 draws on the plans
 #: of the make eval before the squeeze (and the pushes at the first contacts), steps of 2,
@@ -22,16 +23,20 @@ SQUEEZE_LIMIT = math.radians(20.0)
 #: During the squeeze each plate looks for the surface from this far (m) outside its last
 #: contact: a 2 degree turn moves the wall under a 10 mm plate by well under 1 mm.
 SQUEEZE_MARGIN = 0.003
+#: The slide is followed in steps of this length (m), a third to a half of the grids'
+#: cells (2-3 mm); the contacts themselves are found to well under that.
+SLIDE_STEP = 0.001
 
 
 @dataclass(frozen=True)
 class Squeeze:
     """Per draw (B,): whether the squeeze brought the plates into force closure, the turn
-    (rad, 0 where it did not) and the contacts where it stopped (the first contacts
+    (rad) or the slide (m) that did (0 where it did not) and the contacts where it stopped (the first contacts
     for draws in closure at once, or not squeezed into it): c1, c2, w1, w2, edge1, edge2."""
 
     squeezed: np.ndarray
     turn: np.ndarray
+    shift: np.ndarray
     c1: np.ndarray
     c2: np.ndarray
     w1: np.ndarray
@@ -45,7 +50,8 @@ _KEPT = ("c1", "c2", "w1", "w2", "edge1", "edge2")
 
 
 def squeeze(fields: SDFBatch, g1, g2, field_index, contacts: Contacts, closure, friction, jaw_width: float,
-            torque_scale: float, step: float = SQUEEZE_STEP, limit: float = SQUEEZE_LIMIT) -> Squeeze:
+            torque_scale: float, step: float = SQUEEZE_STEP, limit: float = SQUEEZE_LIMIT,
+            slide_limit: float = 0.0) -> Squeeze:
     """Follow the squeeze of B grasps (executed jaw starts g1, g2 (B, 2) on fields
     ``field_index`` (B,), with their ``contacts`` and force ``closure`` (B,)).
 
@@ -57,8 +63,10 @@ def squeeze(fields: SDFBatch, g1, g2, field_index, contacts: Contacts, closure, 
     plates are in force closure (squeezed), the couple changes sign without closure (the
     width's local minimum reached out of closure: the squeeze holds it there) or vanishes,
     a contact is lost (a plate slid off the object, or meets it within SQUEEZE_MARGIN of
-    where it starts looking), or the turn reaches ``limit``. friction: float or (B,)
-    coefficients.
+    where it starts looking), or the turn reaches ``limit``. A draw the turn does not
+    bring into closure then slides from its first contacts (:func:`_slide`), up to
+    ``slide_limit`` (m; 0, the default, turns only; the lift model passes the gripper's
+    opening). friction: float or (B,) coefficients.
     """
     g1 = np.asarray(g1, dtype=float)
     g2 = np.asarray(g2, dtype=float)
@@ -66,9 +74,11 @@ def squeeze(fields: SDFBatch, g1, g2, field_index, contacts: Contacts, closure, 
     field_index = np.broadcast_to(np.asarray(field_index, dtype=np.int64), (b,))
     friction = np.broadcast_to(np.asarray(friction, dtype=float), (b,))
     com = fields.regions.center_of_mass[field_index]
-    out = Squeeze(np.zeros(b, dtype=bool), np.zeros(b), *(getattr(contacts, name).copy() for name in _KEPT))
+    out = Squeeze(np.zeros(b, dtype=bool), np.zeros(b), np.zeros(b),
+                  *(getattr(contacts, name).copy() for name in _KEPT))
     turning = _couple(*_pushes(contacts), g1, g2)
-    active = (contacts.status == OK) & ~np.asarray(closure, dtype=bool) & (turning != 0) & np.isfinite(com[:, 0])
+    candidates = (contacts.status == OK) & ~np.asarray(closure, dtype=bool) & np.isfinite(com[:, 0])
+    active = candidates & (turning != 0)
     last1, last2 = contacts.c1.copy(), contacts.c2.copy()
     angle = 0.0
     while active.any() and angle + step <= limit + 1e-12:
@@ -93,7 +103,64 @@ def squeeze(fields: SDFBatch, g1, g2, field_index, contacts: Contacts, closure, 
         for name in _KEPT:
             getattr(out, name)[done] = getattr(found, name)[closed]
         active[idx[closed | lost | reversed_]] = False
+    _slide(fields, g1, g2, field_index, contacts, candidates & ~out.squeezed, friction, com, jaw_width, torque_scale,
+           out, slide_limit)
     return out
+
+
+def _slide(fields: SDFBatch, g1, g2, field_index, contacts: Contacts, active, friction, com, jaw_width: float,
+           torque_scale: float, out: Squeeze, limit: float) -> None:
+    """The plates' slide, into ``out``: on walls inclined to the plates the pushes have a
+    component across the closing direction u, and where it is beyond the plates'
+    friction the object slides across u (Mason 1986; the squeeze of a wedge). In the
+    object's frame the jaws move the other way; the contacts are found again each
+    SLIDE_STEP until the plates are in force closure (slid into it), the push across u
+    changes sign or vanishes (a position the walls hold out of closure), a contact is
+    lost (the object slid out of the jaws) or the slide reaches ``limit``."""
+    flush = PATCH_DEPTH / jaw_width
+    sense = _across(contacts, g1, g2, flush)
+    active = active & (sense != 0)
+    u = (g2 - g1) / np.linalg.norm(g2 - g1, axis=1, keepdims=True)
+    across = np.column_stack([-u[:, 1], u[:, 0]])
+    last1, last2 = contacts.c1.copy(), contacts.c2.copy()
+    shift = 0.0
+    while active.any() and shift + SLIDE_STEP <= limit + 1e-12:
+        shift += SLIDE_STEP
+        idx = np.flatnonzero(active)
+        move = -(sense[idx] * shift)[:, None] * across[idx]
+        h1, h2 = g1[idx] + move, g2[idx] + move
+        t1 = np.einsum("ij,ij->i", last1[idx] - h1, u[idx]) - SQUEEZE_MARGIN
+        t2 = np.einsum("ij,ij->i", last2[idx] - h1, u[idx]) + SQUEEZE_MARGIN
+        h1, h2 = h1 + t1[:, None] * u[idx], h1 + t2[:, None] * u[idx]
+        found = find_contacts(fields, h1, h2, jaw_width, field_index=field_index[idx])
+        closed, _ = plate_closure(found, friction[idx], com[idx], torque_scale, with_quality=False)
+        lost = found.status != OK
+        stopped = ~lost & (_across(found, h1, h2, flush) != sense[idx])
+        last1[idx], last2[idx] = found.c1, found.c2
+        done = idx[closed]
+        out.squeezed[done] = True
+        out.shift[done] = shift
+        for name in _KEPT:
+            getattr(out, name)[done] = getattr(found, name)[closed]
+        active[idx[closed | lost | stopped]] = False
+
+
+def _across(contacts: Contacts, g1, g2, flush: float) -> np.ndarray:
+    """The sense (B,) in which the walls push the object across the closing direction
+    u = g2 - g1: +1 along u's left normal t, -1 against it, 0 where they do not. Each
+    plate pushes along u against a wall whose inward normal leans from u (from +u for the
+    first plate, -u for the second) by a towards t; without friction the pair pushes the
+    object across u by tan(a_1) + tan(a_2) per unit push. A lean below ``flush`` (the
+    slope at which the wall recedes PATCH_DEPTH across the plate, what the contacts call
+    flush) is none."""
+    d = np.asarray(g2, dtype=float) - np.asarray(g1, dtype=float)
+    u = d / np.linalg.norm(d, axis=1, keepdims=True)
+    t = np.column_stack([-u[:, 1], u[:, 0]])
+    m1, m2 = -contacts.n1, -contacts.n2
+    with np.errstate(invalid="ignore", divide="ignore"):
+        push = (np.einsum("ij,ij->i", m1, t) / np.einsum("ij,ij->i", m1, u)
+                - np.einsum("ij,ij->i", m2, t) / np.einsum("ij,ij->i", m2, u))
+        return np.where(np.abs(push) >= flush, np.sign(push), 0.0)
 
 
 def _pushes(contacts: Contacts) -> tuple[np.ndarray, np.ndarray]:

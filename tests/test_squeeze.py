@@ -141,3 +141,125 @@ def test_a_plate_pushes_at_its_patchs_centre_and_a_curved_wall_at_the_contact(el
     assert curved.w1[0] == 0 and curved.w2[0] == 0
     np.testing.assert_array_equal(q1, curved.c1)
     np.testing.assert_array_equal(q2, curved.c2)
+
+
+# -- the slide -------------------------------------------------------------------------
+
+R_OUT, R_IN = 0.040, 0.025  # the ring's radii
+
+
+@pytest.fixture(scope="module")
+def ring() -> SDFBatch:
+    t = np.linspace(0.0, 2 * math.pi, 2000, endpoint=False)
+    circle = np.column_stack([np.cos(t), np.sin(t)])
+    shape = shapely.Polygon(R_OUT * circle, [R_IN * circle[::-1]])
+    return SDFBatch(GRID, grid_sdf(shape, GRID)[None], grid_sdf_gradient(shape, GRID)[None])
+
+
+def rim(offset):
+    """Jaw starts (1, 2) each closing along +y on the ring's rim below its centre, one
+    outside it and one in its hole, ``offset`` (m) to the right of the radial line."""
+    return np.array([[offset, -0.048]]), np.array([[offset, -0.012]])
+
+
+def closes(fields, g1, g2, friction):
+    contacts = find_contacts(fields, g1, g2, JAW)
+    return contacts, plate_closure(contacts, friction, np.zeros(2), 0.05)[0]
+
+
+def test_the_walls_push_across_the_closing_line_by_the_tangents_of_their_leans():
+    """Closed form: plates pushing along u on walls whose inward normals lean by a1 and a2
+    towards u's left normal push the object across u by tan(a1) + tan(a2) per unit push;
+    below the flush slope (PATCH_DEPTH over the plate's width) no push counts."""
+    from types import SimpleNamespace
+
+    from harness.squeeze import _across
+
+    g1, g2 = np.array([[0.0, -0.04]] * 5), np.array([[0.0, 0.04]] * 5)  # u = +y, left normal -x
+    leans = np.radians([[10.0, 10.0], [10.0, -25.0], [1.0, 1.0], [-30.0, 29.0], [-30.0, 20.0]])
+
+    def inward(a, along):  # a unit vector leaning from ``along`` (+-y) by a towards -x
+        return np.column_stack([-np.sin(a), along * np.cos(a)])
+
+    contacts = SimpleNamespace(n1=-inward(leans[:, 0], 1.0), n2=-inward(leans[:, 1], -1.0))
+    flush = 0.0005 / JAW
+    expected = np.tan(leans[:, 0]) + np.tan(leans[:, 1])
+    np.testing.assert_array_equal(_across(contacts, g1, g2, flush),
+                                  np.where(np.abs(expected) >= flush, np.sign(expected), 0.0))
+    assert list(_across(contacts, g1, g2, flush)) == [1.0, -1.0, 0.0, 0.0, -1.0]  # -30 and +29: tan sum -0.023, flush
+
+
+def test_a_ring_gripped_on_its_rim_off_its_radial_line_slides_into_force_closure(ring):
+    """One jaw in the ring's hole, one outside, 8 mm off the radial line: the outer plate
+    meets the outer wall by its edge, the inner plate the hole's wall by its far edge,
+    both walls leaning away from the radial line, out of force closure at mu = 0.2; a turn
+    about the centre changes nothing on a ring. The walls push the ring sideways, the jaws
+    move back towards its radial line in its frame, and the slide ends at the first
+    SLIDE_STEP at which the shifted grasp is in force closure, found here by judging
+    every shifted grasp on its own (the other way, none is within 8 mm)."""
+    from harness.squeeze import SLIDE_STEP
+
+    mu, offset = 0.2, 0.008
+    g1, g2 = rim(offset)
+    contacts, closed = closes(ring, g1, g2, mu)
+    assert not closed[0] and contacts.edge1[0] and contacts.edge2[0]
+    shifts = np.arange(1, int(round(offset / SLIDE_STEP)) + 1) * SLIDE_STEP
+    towards = [closes(ring, *rim(offset - s), mu)[1][0] for s in shifts]
+    away = [closes(ring, *rim(offset + s), mu)[1][0] for s in shifts]
+    assert any(towards) and not any(away)
+    expected = shifts[towards.index(True)]
+    out = squeeze(ring, g1, g2, 0, contacts, closed, mu, JAW, 0.05, slide_limit=0.1)
+    assert out.squeezed[0] and out.turn[0] == 0.0
+    assert out.shift[0] == pytest.approx(expected, abs=1e-9)
+    settled, _ = closes(ring, *rim(offset - expected), mu)
+    np.testing.assert_allclose(out.c1[0], settled.c1[0], atol=1e-9)
+    np.testing.assert_allclose(out.c2[0], settled.c2[0], atol=1e-9)
+    without = squeeze(ring, g1, g2, 0, contacts, closed, mu, JAW, 0.05)  # slide_limit 0: the turn alone
+    assert not without.squeezed[0]
+
+
+def test_a_disk_gripped_off_centre_by_the_plates_edges_slides_out_of_the_jaws(ring):
+    """A disk gripped 16 mm off its centre by 10 mm plates meets them by their inner
+    edges, its walls leaning 11 degrees from the plates, beyond mu = 0.1: they push the
+    disk away from the plates (the squeeze of a watermelon seed), the jaws move outwards in
+    its frame and lose it; no shifted grasp that way is in force closure."""
+    t = np.linspace(0.0, 2 * math.pi, 2000, endpoint=False)
+    shape = shapely.Polygon(0.03 * np.column_stack([np.cos(t), np.sin(t)]))
+    disk = SDFBatch(GRID, grid_sdf(shape, GRID)[None], grid_sdf_gradient(shape, GRID)[None])
+    mu, offset = 0.1, 0.016
+    g1, g2 = np.array([[offset, -0.045]]), np.array([[offset, 0.045]])
+    contacts, closed = closes(disk, g1, g2, mu)
+    assert not closed[0] and contacts.edge1[0] and contacts.edge2[0]
+    assert not any(closes(disk, g1 + [[s, 0.0]], g2 + [[s, 0.0]], mu)[1][0] for s in np.arange(0.0005, 0.03, 0.0005))
+    out = squeeze(disk, g1, g2, 0, contacts, closed, mu, JAW, 0.05, slide_limit=0.1)
+    assert not out.squeezed[0] and out.shift[0] == 0.0
+    np.testing.assert_array_equal(out.c1, contacts.c1)
+
+
+def test_the_slide_counts_in_p_l_where_the_turn_cannot_help(ring):
+    """P_L of the ring's rim grasp of the slide test: 1 with the slide (up to the gripper's
+    opening), against P_F's 0, on identical draws."""
+    n = 4
+    draws = EvaluationDraws(SDFBatch(GRID, np.repeat(ring.values, n, axis=0),
+                                     np.repeat(np.stack([ring.gx, ring.gy], axis=-1), n, axis=0)),
+                            np.zeros((n, 2, 2)), np.zeros(n), np.full((n, 2), 0.5), 0.05)
+    settings = replace(resolve(load_scene("disk"), {"sigma_g": 0.0, "friction": 0.2}), density=1.0)
+    out = evaluate_draws(np.concatenate(rim(0.008))[None], draws, settings)
+    est = out.estimates[0]
+    assert est.p_f == 0.0 and est.p_l == 1.0 and est.squeezed == n
+
+
+def test_bench_lifts_slide_cases_judged_by_the_model():
+    """bench lift's slide cases, their model side (the physics is the bench's): the ring
+    gripped 8 mm off its radial line is out of force closure at the first contacts on
+    nearly every draw (sigma_g 1 mm) and slides into it on every one; the disk gripped 16
+    mm off its centre slides out of the jaws on every draw."""
+    from harness.bench.lift_study import SLIDES, _exact_draws
+
+    ring_case, disk_case = SLIDES
+    for case, offset, p_f, p_l in ((ring_case, 0.008, 0.0, 1.0), (disk_case, 0.016, 0.0, 0.0)):
+        scene = case.scene()
+        settings, _, draws = _exact_draws(scene, 100, 0, case.label)
+        out = evaluate_draws(case.grasp(offset), draws, settings)
+        assert out.closure.mean() == pytest.approx(p_f, abs=0.02)
+        assert out.lifted.mean() == pytest.approx(p_l, abs=0.02)

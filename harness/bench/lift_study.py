@@ -77,10 +77,11 @@ class Bar:
 
 
 def _solid(name: str, shape: dict, thickness: float, density: float, friction: float, force: float,
-           source: str) -> Scene:
-    """A fully observed test object (a scene of ``shape``) on a 40-cell, 20 cm grid, with
-    the built-in parallel jaw (10 cm opening, 1 cm plates) at ``force``."""
-    data = {"name": name, "grid": {"size": 40, "extent": 0.2}, "shape": shape, "sensor": {"noise": 0.0005},
+           source: str, cells: int = 40) -> Scene:
+    """A fully observed test object (a scene of ``shape``) on a grid of ``cells`` cells
+    over 20 cm (5 mm cells by default), with the built-in parallel jaw (10 cm opening, 1
+    cm plates) at ``force``."""
+    data = {"name": name, "grid": {"size": cells, "extent": 0.2}, "shape": shape, "sensor": {"noise": 0.0005},
             "physics": {"thickness": thickness, "density": density, "friction": friction},
             "gripper": {"opening": 0.1, "jaw_width": 0.01, "force": force}}
     return parse_scene(data, source, Path("."))
@@ -99,6 +100,54 @@ BARS = (
     Bar(0.14, 4000.0, 0.6, 12.0),
     Bar(0.12, 6000.0, 0.5, 10.0),
 )
+
+
+@dataclass(frozen=True)
+class SlideCase:
+    """A ring gripped on its rim (one jaw in its hole, one outside) or a disk gripped
+    across, the jaws' line of action at a growing offset from the centre: beyond the
+    plates' half-width the plates meet the walls by their edges, and the walls' pushes
+    slide the object across the closing line (harness.squeeze): the ring towards its
+    radial line, into force closure, the disk away from the plates, out of the jaws."""
+
+    kind: str  # "ring" or "disk"
+    friction: float = 0.2
+    force: float = 20.0
+    radius: float = 0.04
+    hole: float = 0.025
+    thickness: float = 0.03
+    density: float = 1000.0
+
+    @property
+    def label(self) -> str:
+        what = (f"ring {self.radius * 200:g} / {self.hole * 200:g} cm, a jaw in the hole" if self.kind == "ring"
+                else f"disk {self.radius * 200:g} cm")
+        return f"{what}, mu {self.friction:g}, {self.force:g} N"
+
+    @property
+    def mass(self) -> float:
+        inner = self.hole if self.kind == "ring" else 0.0
+        return self.density * self.thickness * math.pi * (self.radius**2 - inner**2)
+
+    def scene(self) -> Scene:
+        shape = ({"type": "ring", "outer_radius": self.radius, "inner_radius": self.hole} if self.kind == "ring"
+                 else {"type": "disk", "radius": self.radius})
+        return _solid(self.kind, shape, self.thickness, self.density, self.friction, self.force,
+                      f"<{self.kind} {self.label}>", cells=80)
+
+    def offsets(self) -> np.ndarray:
+        """From the centre line to 24 mm off it, every 2 mm."""
+        return np.arange(0.0, 0.0241, 0.002)
+
+    def grasp(self, offset: float) -> np.ndarray:
+        if self.kind == "ring":  # from below the rim to the middle of the hole's lower half
+            return np.array([[offset, -self.radius - CLEARANCE], [offset, -0.5 * self.hole]])
+        return np.array([[offset, -self.radius - CLEARANCE], [offset, self.radius + CLEARANCE]])
+
+
+#: The slide's controlled cases: 3 cm thick, 1000 kg/m^3, mu 0.2 (a friction cone of 11
+#: degrees), 20 N.
+SLIDES = (SlideCase("ring"), SlideCase("disk", radius=0.03))
 
 
 def _exact_draws(scene: Scene, n: int, seed: int, *keys):
@@ -134,7 +183,8 @@ def sweep(bar: Bar, trials: int = 12, seed: int = 0, runner=None) -> list[dict]:
         analytic = evaluate_draws(bar.grasp(d), draws, settings)
         rows.append({"offset": float(d), "success": float(np.mean([r.outcome == "success" for r in mine])),
                      "turned": float(np.mean([r.pivot > TURNED for r in mine])),
-                     "p_l": float(analytic.lifted.mean()), "turns": float(analytic.pivots.mean()),
+                     "p_l": float(analytic.lifted.mean()), "p_f": float(analytic.closure.mean()),
+                     "turns": float(analytic.pivots.mean()),
                      "outcomes": dict(Counter(r.outcome for r in mine)),
                      "held_turns": [float(r.pivot) for r in mine if r.outcome == "success" and r.pivot > TURNED]})
     return rows
@@ -382,7 +432,8 @@ def hang_sweep(hang: "HangBar | _HeadAndHandle", trials: int = 12, seed: int = 0
                          "turned": float(np.mean([r.pivot > TURNED for r in results])),
                          "turned_trials": len(turned),
                          "turned_successes": sum(r.outcome == "success" for r in turned),
-                         "p_l": float(analytic.lifted.mean()), "turns": float(analytic.pivots.mean()),
+                         "p_l": float(analytic.lifted.mean()), "p_f": float(analytic.closure.mean()),
+                     "turns": float(analytic.pivots.mean()),
                          "outcomes": dict(Counter(r.outcome for r in results)),
                          "held_turn_median": float(np.median([r.pivot for r in held])) if held else None,
                          "slide_median": float(np.median(slides)) if slides else None})
@@ -536,15 +587,19 @@ def benchmark(settings: Settings = Settings()) -> dict:
     levers of Bullet's contact manifolds on the library trial set; the bar sweeps again
     in MuJoCo."""
     return {**validate(trials=settings.trials, seed=settings.seed),
+            "slide": validate(SLIDES, trials=settings.trials, seed=settings.seed),
             "hang": hang_validate(trials=settings.trials, seed=settings.seed),
             "hang_fine": hang_validate(trials=settings.trials, seed=settings.seed, finer=HANG_FINER),
             "manifold_levers": manifold_levers(seed=settings.seed),
             "mujoco": {**validate(trials=settings.trials, seed=settings.seed, engine="mujoco"),
+                       "slide": validate(SLIDES, trials=settings.trials, seed=settings.seed, engine="mujoco"),
                        "hang": hang_validate(trials=settings.trials, seed=settings.seed, engine="mujoco")}}
 
 
 def format_lines(res: dict) -> list[str]:
     lines = _bar_lines(res)
+    if "slide" in res:
+        lines += _slide_lines(res["slide"])
     for key in ("hang", "hang_fine"):
         if key in res:
             lines += _hang_lines(res[key])
@@ -555,6 +610,8 @@ def format_lines(res: dict) -> list[str]:
                  f"0.75), {m['single_point']:.0%} held by one point, {m['beyond_largest']:.1%} beyond the largest")
     if "mujoco" in res:
         lines += ["", "the same bars in MuJoCo:", *_bar_lines(res["mujoco"])]
+        if "slide" in res["mujoco"]:
+            lines += _slide_lines(res["mujoco"]["slide"])
         if "hang" in res["mujoco"]:
             lines += _hang_lines(res["mujoco"]["hang"])
     return lines
@@ -584,6 +641,19 @@ def _bar_lines(res: dict) -> list[str]:
     lines.append(f"largest relative error: P_L vs success {err(largest)}, the model's turning vs the "
                  f"simulation's {err(res['largest_turning_error'])}"
                  + (f"; {res['missing']} rows without a crossing on one side" if res["missing"] else ""))
+    return lines
+
+
+def _slide_lines(res: dict) -> list[str]:
+    """Per slide case and offset (mm): simulated success, P_L and P_F (force closure at
+    the first contacts, before any squeeze)."""
+    offsets = ", ".join(f"{p['offset'] * 1e3:g}" for p in res["rows"][0]["points"])
+    lines = [f"slide cases ({res['engine']}): the jaws' line {offsets} mm off the centre, "
+             f"{res['trials_per_offset']} trials and {res['analytic_draws']} analytic draws per offset: "
+             f"success / P_L / P_F"]
+    for r in res["rows"]:
+        lines.append(f"  {r['bar']}: " + "  ".join(f"{p['success']:.2f}/{p['p_l']:.2f}/{p['p_f']:.2f}"
+                                                    for p in r["points"]))
     return lines
 
 
