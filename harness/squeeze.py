@@ -90,23 +90,13 @@ def squeeze(fields: SDFBatch, g1, g2, field_index, contacts: Contacts, closure, 
         angle += step
         idx = np.flatnonzero(active)
         # The object turns by +angle in the couple's sense; the jaws, in its frame, by -angle
-        # about its centre of mass. They are closed on it: each plate's search starts
-        # SQUEEZE_MARGIN outside its last contact, not at the jaw's start.
+        # about its centre of mass.
         h1, h2 = (_turn(g[idx], com[idx], -turning[idx] * angle) for g in (g1, g2))
         u = (h2 - h1) / np.linalg.norm(h2 - h1, axis=1, keepdims=True)
-        t1 = np.einsum("ij,ij->i", last1[idx] - h1, u) - SQUEEZE_MARGIN
-        t2 = np.einsum("ij,ij->i", last2[idx] - h1, u) + SQUEEZE_MARGIN
-        h1, h2 = h1 + t1[:, None] * u, h1 + t2[:, None] * u
-        found = find_contacts(fields, h1, h2, jaw_width, field_index=field_index[idx])
-        closed, _ = plate_closure(found, friction[idx], com[idx], torque_scale, with_quality=False)
-        lost = found.status != OK
+        found, h1, h2, closed, lost = _settle(fields, h1, u, idx, last1, last2, field_index, friction, com,
+                                              jaw_width, torque_scale, out)
         reversed_ = ~lost & (_couple(*_pushes(found), h1, h2) != turning[idx])
-        last1[idx], last2[idx] = found.c1, found.c2
-        done = idx[closed]
-        out.squeezed[done] = True
-        out.turn[done] = angle
-        for name in _KEPT:
-            getattr(out, name)[done] = getattr(found, name)[closed]
+        out.turn[idx[closed]] = angle
         active[idx[closed | lost | reversed_]] = False
     _slide(fields, g1, g2, field_index, contacts, candidates & ~out.squeezed, friction, com, jaw_width, torque_scale,
            out, slide_limit)
@@ -133,21 +123,33 @@ def _slide(fields: SDFBatch, g1, g2, field_index, contacts: Contacts, active, fr
         shift += SLIDE_STEP
         idx = np.flatnonzero(active)
         move = -(sense[idx] * shift)[:, None] * across[idx]
-        h1, h2 = g1[idx] + move, g2[idx] + move
-        t1 = np.einsum("ij,ij->i", last1[idx] - h1, u[idx]) - SQUEEZE_MARGIN
-        t2 = np.einsum("ij,ij->i", last2[idx] - h1, u[idx]) + SQUEEZE_MARGIN
-        h1, h2 = h1 + t1[:, None] * u[idx], h1 + t2[:, None] * u[idx]
-        found = find_contacts(fields, h1, h2, jaw_width, field_index=field_index[idx])
-        closed, _ = plate_closure(found, friction[idx], com[idx], torque_scale, with_quality=False)
-        lost = found.status != OK
+        found, h1, h2, closed, lost = _settle(fields, g1[idx] + move, u[idx], idx, last1, last2, field_index,
+                                              friction, com, jaw_width, torque_scale, out)
         stopped = ~lost & (_across(found, h1, h2, flush) != sense[idx])
-        last1[idx], last2[idx] = found.c1, found.c2
-        done = idx[closed]
-        out.squeezed[done] = True
-        out.shift[done] = shift
-        for name in _KEPT:
-            getattr(out, name)[done] = getattr(found, name)[closed]
+        out.shift[idx[closed]] = shift
         active[idx[closed | lost | stopped]] = False
+
+
+def _settle(fields: SDFBatch, h1, u, idx, last1, last2, field_index, friction, com, jaw_width: float,
+            torque_scale: float, out: Squeeze):
+    """One step of the squeeze for draws ``idx``, the first jaw moved (in the object's
+    frame) to h1, closing along the unit vector u: the jaws are closed on the object, so
+    each plate's search starts
+    SQUEEZE_MARGIN outside its last contact (``last1``, ``last2``, updated here), not at
+    the jaw's start. The draws now in force closure are squeezed, with these contacts,
+    into ``out``. Returns the contacts found, the plates' search starts, and which draws
+    closed and which lost a contact."""
+    t1 = np.einsum("ij,ij->i", last1[idx] - h1, u) - SQUEEZE_MARGIN
+    t2 = np.einsum("ij,ij->i", last2[idx] - h1, u) + SQUEEZE_MARGIN
+    h1, h2 = h1 + t1[:, None] * u, h1 + t2[:, None] * u
+    found = find_contacts(fields, h1, h2, jaw_width, field_index=field_index[idx])
+    closed, _ = plate_closure(found, friction[idx], com[idx], torque_scale, with_quality=False)
+    last1[idx], last2[idx] = found.c1, found.c2
+    done = idx[closed]
+    out.squeezed[done] = True
+    for name in _KEPT:
+        getattr(out, name)[done] = getattr(found, name)[closed]
+    return found, h1, h2, closed, found.status != OK
 
 
 def _across(contacts: Contacts, g1, g2, flush: float) -> np.ndarray:
