@@ -23,9 +23,9 @@ SQUEEZE_LIMIT = math.radians(20.0)
 #: During the squeeze each plate looks for the surface from this far (m) outside its last
 #: contact: a 2 degree turn moves the wall under a 10 mm plate by well under 1 mm.
 SQUEEZE_MARGIN = 0.003
-#: The slide is followed in steps of this length (m), a third to a half of the grids'
-#: cells (2-3 mm); the contacts themselves are found to well under that.
-SLIDE_STEP = 0.001
+#: The slide is followed in steps of this length (m), about a grid cell (2-3 mm on the
+#: library and the sweep); the contacts themselves are found to well under that.
+SLIDE_STEP = 0.002
 #: The longest slide followed (m), a cost cap as SQUEEZE_LIMIT is: each step past the
 #: last costs a search for the contacts of the draws still sliding, and most slides that
 #: go on end with the object out of the jaws. 95 % of the slides into closure of the
