@@ -99,7 +99,7 @@ def test_regime_rows_match_the_trials(sweep):
         for p in rs.LIFT_PLANNERS:
             assert r[f"diff:{p}"] == pytest.approx(direct["diff"][p], abs=1e-12)
             assert r[f"diff_low:{p}"] <= r[f"diff:{p}"] + 1e-12 <= r[f"diff_high:{p}"] + 2e-12
-    assert spearmans >= 3  # the comparison ran on rows where success varies
+    assert spearmans >= 2  # the comparison ran on rows where both P_L and success vary
     assert not {"design"} & set(rows[rows.regime_held_out].part)
 
 
