@@ -16,7 +16,7 @@ from harness.grasp import (DEGENERATE, HULL_DIRECTIONS, MISSED, OK, TOO_WIDE, Co
                            body_fields, find_contacts, plate_closure)
 from harness.lift import LIFT_REASONS, judge, side_normal
 from harness.settings import GraspSettings
-from harness.squeeze import SLIDE_LIMIT, squeeze
+from harness.squeeze import squeeze
 
 #: Failure reasons, in the order a draw is classified (the first that applies): the
 #: planar ones (P_F), then the lift's for draws in force closure (P_L).
@@ -354,8 +354,7 @@ def _on_bodies(g1, g2, field, draws: EvaluationDraws, contacts: Contacts, closur
     jaw, scale = settings.jaw_width, draws.torque_scale
     on_split = draws.shapes.regions.fragmented[field]
     if not on_split.any():
-        return contacts, closure, squeeze(draws.shapes, g1, g2, field, contacts, closure, gamma, jaw, scale,
-                                         slide_limit=SLIDE_LIMIT)
+        return contacts, closure, squeeze(draws.shapes, g1, g2, field, contacts, closure, gamma, jaw, scale)
     closure = closure.copy()
     pieces = []
     fragmented = np.unique(field[on_split])
@@ -369,9 +368,8 @@ def _on_bodies(g1, g2, field, draws: EvaluationDraws, contacts: Contacts, closur
         contacts = _replace_rows(contacts, rows, on_body)
         closure[rows] = body_closure
         pieces.append((rows, squeeze(bodies, g1[rows], g2[rows], local, on_body, body_closure, gamma[rows], jaw,
-                                     scale, slide_limit=SLIDE_LIMIT)))
-    settled = squeeze(draws.shapes, g1, g2, field, contacts, closure | on_split, gamma, jaw, scale,
-                      slide_limit=SLIDE_LIMIT)  # the rest
+                                     scale)))
+    settled = squeeze(draws.shapes, g1, g2, field, contacts, closure | on_split, gamma, jaw, scale)  # the rest
     for rows, part in pieces:
         settled = _replace_rows(settled, rows, part)
     return contacts, closure, settled

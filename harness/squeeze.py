@@ -56,7 +56,7 @@ _KEPT = ("c1", "c2", "w1", "w2", "edge1", "edge2")
 
 def squeeze(fields: SDFBatch, g1, g2, field_index, contacts: Contacts, closure, friction, jaw_width: float,
             torque_scale: float, step: float = SQUEEZE_STEP, limit: float = SQUEEZE_LIMIT,
-            slide_limit: float = 0.0) -> Squeeze:
+            slide_limit: float = SLIDE_LIMIT) -> Squeeze:
     """Follow the squeeze of B grasps (executed jaw starts g1, g2 (B, 2) on fields
     ``field_index`` (B,), with their ``contacts`` and force ``closure`` (B,)).
 
@@ -70,8 +70,7 @@ def squeeze(fields: SDFBatch, g1, g2, field_index, contacts: Contacts, closure, 
     a contact is lost (a plate slid off the object, or meets it within SQUEEZE_MARGIN of
     where it starts looking), or the turn reaches ``limit``. A draw the turn does not
     bring into closure then slides from its first contacts (:func:`_slide`), up to
-    ``slide_limit`` (m; 0, the default, turns only; the lift model passes the gripper's
-    opening). friction: float or (B,) coefficients.
+    ``slide_limit`` (m; 0 turns only). friction: float or (B,) coefficients.
     """
     g1 = np.asarray(g1, dtype=float)
     g2 = np.asarray(g2, dtype=float)

@@ -10,7 +10,7 @@ import numpy as np
 
 from harness.grasp import find_contacts, plate_closure
 from harness.lift import MassBelief
-from harness.squeeze import SLIDE_LIMIT, squeeze
+from harness.squeeze import squeeze
 from planners.base import Plan, Planner, Problem, check_quality
 from planners.sampling import search
 
@@ -44,7 +44,7 @@ class MeanShape(Planner):
             return quality, np.zeros(len(grasps))
         # As P_L: a grasp out of force closure may be squeezed into it (harness.squeeze).
         settled = squeeze(mean, grasps[:, 0], grasps[:, 1], 0, c, closed, settings.friction, settings.jaw_width,
-                          belief.characteristic_length, slide_limit=SLIDE_LIMIT)
+                          belief.characteristic_length)
         held = closed | settled.squeezed
         lift = np.zeros(len(grasps))
         lift[held] = mass.margin(settled.c1[held], settled.c2[held], settled.w1[held], settled.w2[held],

@@ -41,7 +41,7 @@ def run(fields, theta, friction):
     g1, g2 = jaws(theta)
     contacts = find_contacts(fields, g1, g2, JAW)
     closed, _ = plate_closure(contacts, friction, np.zeros(2), 0.05)
-    return contacts, closed, squeeze(fields, g1, g2, 0, contacts, closed, friction, JAW, 0.05)
+    return contacts, closed, squeeze(fields, g1, g2, 0, contacts, closed, friction, JAW, 0.05, slide_limit=0.0)
 
 
 def width(theta):
@@ -214,7 +214,7 @@ def test_a_ring_gripped_on_its_rim_off_its_radial_line_slides_into_force_closure
     settled, _ = closes(ring, *rim(offset - expected), mu)
     np.testing.assert_allclose(out.c1[0], settled.c1[0], atol=1e-9)
     np.testing.assert_allclose(out.c2[0], settled.c2[0], atol=1e-9)
-    without = squeeze(ring, g1, g2, 0, contacts, closed, mu, JAW, 0.05)  # slide_limit 0: the turn alone
+    without = squeeze(ring, g1, g2, 0, contacts, closed, mu, JAW, 0.05, slide_limit=0.0)  # the turn alone
     assert not without.squeezed[0]
 
 
