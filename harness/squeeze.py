@@ -104,10 +104,12 @@ def squeeze(fields: SDFBatch, g1, g2, field_index, contacts: Contacts, closure, 
 
 def _slide(fields: SDFBatch, g1, g2, field_index, contacts: Contacts, active, friction, com, jaw_width: float,
            torque_scale: float, out: Squeeze, limit: float) -> None:
-    """The plates' slide, into ``out``: on walls inclined to the plates the pushes have a
-    component across the closing direction u, and where it is beyond the plates'
-    friction the object slides across u (Mason 1986; the squeeze of a wedge). In the
-    object's frame the jaws move the other way; the contacts are found again each
+    """The plates' slide, into ``out``, of draws the turn left out of force closure: on
+    walls leaning from the plates the pushes have a component across the closing
+    direction u (:func:`_across`), and with no closure to hold it the object slides that
+    way on the table (Mason 1986; the squeeze of a wedge); the plates' friction enters
+    through the closure test at each step. In the object's frame the jaws move the other
+    way; the contacts are found again each
     SLIDE_STEP until the plates are in force closure (slid into it), the push across u
     changes sign or vanishes (a position the walls hold out of closure), a contact is
     lost (the object slid out of the jaws) or the slide reaches ``limit``."""
@@ -133,8 +135,7 @@ def _settle(fields: SDFBatch, h1, u, idx, last1, last2, field_index, friction, c
             torque_scale: float, out: Squeeze):
     """One step of the squeeze for draws ``idx``, the first jaw moved (in the object's
     frame) to h1, closing along the unit vector u: the jaws are closed on the object, so
-    each plate's search starts
-    SQUEEZE_MARGIN outside its last contact (``last1``, ``last2``, updated here), not at
+    each plate's search starts SQUEEZE_MARGIN outside its last contact (``last1``, ``last2``, updated here), not at
     the jaw's start. The draws now in force closure are squeezed, with these contacts,
     into ``out``. Returns the contacts found, the plates' search starts, and which draws
     closed and which lost a contact."""
@@ -156,9 +157,9 @@ def _across(contacts: Contacts, g1, g2, flush: float) -> np.ndarray:
     u = g2 - g1: +1 along u's left normal t, -1 against it, 0 where they do not. Each
     plate pushes along u against a wall whose inward normal leans from u (from +u for the
     first plate, -u for the second) by a towards t; without friction the pair pushes the
-    object across u by tan(a_1) + tan(a_2) per unit push. A lean below ``flush`` (the
-    slope at which the wall recedes PATCH_DEPTH across the plate, what the contacts call
-    flush) is none."""
+    object across u by tan(a_1) + tan(a_2) per unit push. A sum below ``flush`` (the
+    slope at which a wall recedes PATCH_DEPTH across the plate, what the contacts call
+    flush) is no push."""
     d = np.asarray(g2, dtype=float) - np.asarray(g1, dtype=float)
     u = d / np.linalg.norm(d, axis=1, keepdims=True)
     t = np.column_stack([-u[:, 1], u[:, 0]])
