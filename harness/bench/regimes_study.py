@@ -375,6 +375,8 @@ def regime_map(rows: pd.DataFrame, path: Path) -> Path:
         axes[e, 2].set_title(f"{engine}: success - {BASELINE_LIFT} (paired, 95 %)", fontsize=9)
     axes[0, 0].set_yticks(y, [r + (" *" if rows[rows.regime == r].regime_held_out.any() else "") for r in regimes],
                           fontsize=8)
+    for ax in axes[:, 0]:  # the shared labels, the same size in every engine's row
+        ax.tick_params(axis="y", labelsize=8)
     axes[0, 0].invert_yaxis()
     axes[0, 0].legend(fontsize=7, loc="lower left")
     axes[0, 2].legend(fontsize=6, loc="lower left")
