@@ -562,7 +562,7 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--out", default=None,
                        help="bench engines: the folder of its two runs, its frames and study.json "
                             "(default results/engines); bench regimes: the folder of its runs, objects, "
-                            "regimes.csv, regimes.json and regime_map.png (default results/regimes)")
+                            "regimes.csv, verdicts.csv, regimes.json and regime_map.png (default results/regimes)")
     bench.add_argument("--workers", type=_positive_int, default=None,
                        help="bench engines and regimes: worker processes of each run (default: one per core)")
     bench.add_argument("--scheduler", default=None, metavar="ADDRESS",

@@ -132,6 +132,34 @@ def test_outputs_and_the_command_line(sweep, tmp_path):
     assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1 and "--engines" in bad.stderr
 
 
+def test_verdict_rows_agree_with_the_draws_judged_again(sweep):
+    """verdicts.csv: per engine, regime and part, the trials of each verdict sum to the
+    part's posterior trials, and each verdict's count and success equal those found by
+    judging every trial's own draw again (harness.explain.trial_draws: the cells opened
+    anew, not the ledger's verdicts), to 1e-12."""
+    from harness.explain import trial_draws
+
+    out, result = sweep
+    table = pd.read_csv(out / "verdicts.csv")
+    assert len(table) == len(result["verdicts"]) and set(table.engine) == {"pybullet"}
+    held = {o.name for o in OBJECTS if o.held_out}
+    names = {o.name for o in OBJECTS}
+    for regime in REGIMES:
+        draws = trial_draws(out / "pybullet" / regime.name)
+        for part, g in table[table.regime == regime.name].groupby("part"):
+            scenes = {"all": names, "design": names - held, "held_out": names if regime.held_out else held}[part]
+            mine = draws[draws.scene.isin(scenes)]
+            assert g.trials.sum() == len(mine) == len(scenes) * len(PLANNERS) * 6
+            direct = mine.assign(s=mine.outcome == "success").groupby("verdict").s.agg(["size", "mean"])
+            got = g.set_index("verdict")
+            assert set(got.index) == set(direct.index)
+            for v in direct.index:
+                assert got.loc[v, "trials"] == direct.loc[v, "size"]
+                assert got.loc[v, "success"] == pytest.approx(direct.loc[v, "mean"], abs=1e-12)
+            shares = [c for c in g.columns if c.startswith("share:")] + ["success"]
+            assert np.allclose(g[shares].fillna(0).sum(axis=1), 1.0, atol=1e-12)
+
+
 def _posterior(rates: np.ndarray, n: int, rng) -> pd.DataFrame:
     """Posterior trials of len(rates) plans, n each, success drawn at each plan's rate."""
     wins = rng.random((len(rates), n)) < rates[:, None]

@@ -185,6 +185,7 @@ def run(out: Path = Path("results/regimes"), engines=("pybullet",), workers: int
     (out / "regimes.json").write_text(json.dumps(result, indent=1, default=jsonable) + "\n")
     rows = pd.DataFrame(result["rows"])
     rows.to_csv(out / "regimes.csv", index=False)
+    pd.DataFrame(result["verdicts"]).to_csv(out / "verdicts.csv", index=False)
     result["figure"] = str(regime_map(rows, out / "regime_map.png"))
     return result
 
@@ -194,12 +195,14 @@ def study(out: Path, engines=("pybullet",), regimes=REGIMES, objects=None) -> di
     P_L, each planner's success and the lift planners' paired differences; two
     yardsticks for P_L, the Brier score's floor (:func:`brier_floor`) and, with two
     engines, the other engine's success per plan as the estimate
-    (:func:`engine_yardstick`); and the differences pooled over the sweep."""
+    (:func:`engine_yardstick`); per verdict of the model on each posterior trial's own
+    draw, how often the physics succeeded (:func:`verdict_rows`); and the differences
+    pooled over the sweep."""
     from harness.report import load, restricted
 
     objects = objects or regime_objects()
     held = {o.name for o in objects if o.held_out}
-    rows, pooled = [], {}
+    rows, verdicts, pooled = [], [], {}
     loaded = {(engine, regime.name): load(Path(out) / engine / regime.name)
               for engine in engines for regime in regimes}
     for engine in engines:
@@ -226,8 +229,10 @@ def study(out: Path, engines=("pybullet",), regimes=REGIMES, objects=None) -> di
                                                 theirs["trials"][theirs["trials"].shapes == "posterior"],
                                                 mine["plans"], theirs["plans"]))
                 rows.append({**row, **{k: v for k, v in asdict(regime).items() if k not in ("name", "held_out")}})
+                verdicts.extend({"engine": engine, "regime": regime.name, "part": part, **v}
+                                for v in verdict_rows(data, scenes))
         pooled[engine] = _pooled(runs, regimes, held)
-    return {"rows": rows, "pooled": pooled, "regimes": [asdict(r) for r in regimes],
+    return {"rows": rows, "verdicts": verdicts, "pooled": pooled, "regimes": [asdict(r) for r in regimes],
             "objects": {"design": sorted(o.name for o in objects if not o.held_out), "held_out": sorted(held)},
             "targets": {"spearman": SPEARMAN_TARGET, "brier": BRIER_TARGET, "varies_share": VARIES_SHARE,
                         "success_varies_below": SUCCESS_VARIES_BELOW}}
@@ -261,6 +266,28 @@ def _regime_row(data: dict, scenes: list[str]) -> dict:
     row["p_l_holds"] = bool(row.get("p_l_spearman", math.nan) >= SPEARMAN_TARGET
                             and row.get("p_l_brier", math.nan) <= BRIER_TARGET)
     return row
+
+
+def verdict_rows(data: dict, scenes: list[str]) -> list[dict]:
+    """Per verdict of the model on each posterior trial's own draw (the ledger's: 'lifted',
+    'lifted_turned' or the first reason P_L fails, harness.report.reasons), over these
+    scenes' trials of every planner: how many trials, and the share the physics lifted
+    (``success``) and lost by each outcome (``share:OUTCOME``). Where the model's verdict
+    and the physics part (a failure that succeeds, a lifted draw that does not) is where
+    P_L's errors come from (docs/lift.md, "What keeps it from the targets")."""
+    from harness.report import ALL, reasons, restricted
+
+    table = reasons(restricted(data, scenes))
+    if table.empty:
+        return []
+    table = table[table.planner == ALL].drop(columns="planner")
+    outcomes = [c for c in table.columns if c != "analytic"]
+    out = []
+    for r in table.to_dict("records"):
+        n = sum(r[c] for c in outcomes)
+        out.append({"verdict": r["analytic"], "trials": int(n),
+                    **{(c if c == "success" else f"share:{c}"): r[c] / n for c in outcomes}})
+    return out
 
 
 def brier_floor(post: pd.DataFrame) -> float:
