@@ -268,3 +268,11 @@ def test_the_engines_study_reports_the_runs_own_counts(quick_runs, tmp_path):
     assert res["engines"] == ["pybullet", "mujoco"]
     text = "\n".join(format_lines(res))
     assert "pybullet 3.2.7 against mujoco" in text and "paired trials" in text
+    # With the bars of bench lift (as bench engines runs them): one row per bar in each engine.
+    row = {"bar": "bar 18 x 3 x 3 cm", "points": [{"offset": 0.0}, {"offset": 0.004}], "p_l_at": 0.03,
+           "success_at": 0.028, "error": 0.07, "model_turning_at": 0.03, "turning_at": None, "turning_error": None,
+           "held_turn_median": None, "failures": {"slipped": 3}}
+    bars = {"rows": [row], "trials_per_offset": 4, "analytic_draws": 50, "sigma_g": 0.0, "largest_error": 0.07,
+            "largest_turning_error": None, "missing": 0}
+    text = "\n".join(format_lines({**res, "lift": {"pybullet": bars, "mujoco": bars}}))
+    assert text.count("bar 18 x 3 x 3 cm") == 2 and "the lift model's bars in mujoco:" in text

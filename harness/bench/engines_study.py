@@ -235,7 +235,7 @@ def format_lines(res: dict) -> list[str]:
     for f in res.get("frames", []):
         lines.append(f"frames of {f['trial']}: recorded {f['recorded'][0]} / {f['recorded'][1]}, in {f['folder']}")
     if "lift" in res:
-        from harness.bench import _bar_lines
+        from harness.bench.lift_study import _bar_lines
 
         for name, lift in res["lift"].items():
             lines += ["", f"the lift model's bars in {name}:", *_bar_lines(lift)]
