@@ -67,6 +67,11 @@ CONTACT_DAMPRATIO = 1.0
 WELD_TIMECONST = 0.004
 #: The table's size (m): a plane; only its visual extent depends on it.
 TABLE_HALF = 1.0
+#: Compiled models kept per process (70-100 kB each): as many as the shapes' bodies
+#: (harness.physics.bodies.recipe). A least-recently-used cache that is smaller than the
+#: shapes a process cycles through misses on every trial: with 128, the 130 shapes of
+#: `bench physics`' trial set were compiled again on every pass.
+MODEL_CACHE = 256
 
 
 def contact_timeconst(protocol: Protocol) -> float:
@@ -354,7 +359,7 @@ def options_xml(p: Protocol) -> str:
             f'<default><geom solref="{tc:.12g} {CONTACT_DAMPRATIO:.12g}"/></default>')
 
 
-@lru_cache(maxsize=128)
+@lru_cache(maxsize=MODEL_CACHE)
 def compiled(obj: tuple[str, str], gripper: str, options: str, table_friction: float) -> mujoco.MjModel:
     """The trial's model from its parts' MJCF, compiled once per process for each shape,
     gripper and protocol (a compile takes 4-10 ms; an experiment executes each posterior
