@@ -313,3 +313,65 @@ def test_every_posterior_trial_gets_its_own_draws_verdict_when_trials_outnumber_
     assert analytic["draws"] == 50
     assert analytic["p_l"] == pipeline.judge(cell, pipeline.planned_grasp(row), 50).estimates[0].p_l
     assert len(set(labels)) > 1  # the draws differ: a label per trial is not one label repeated
+
+
+def _polar_moment(polygon, point) -> float:
+    """The polygon's polar second moment of area about ``point`` (Green's theorem over
+    each ring; holes subtract)."""
+    total = 0.0
+    for k, ring in enumerate([polygon.exterior, *polygon.interiors]):
+        x, y = (np.asarray(ring.coords) - point).T
+        cross = x[:-1] * y[1:] - x[1:] * y[:-1]
+        moment = np.sum(cross * (x[:-1] ** 2 + x[:-1] * x[1:] + x[1:] ** 2 + y[:-1] ** 2 + y[:-1] * y[1:]
+                                 + y[1:] ** 2)) / 12
+        total += abs(moment) * (1 if k == 0 else -1)
+    return total
+
+
+def test_the_load_cases_ratios_are_their_outlines_loads_over_the_plates_resistance():
+    """`bench lift`'s load cases state their loads in closed form from the case's
+    dimensions; the same from the simulated outline (its area, centre of mass, rim width
+    along the jaws' line and polar moment) agrees within 2 %."""
+    from shapely.geometry import LineString
+
+    from harness.bench.lift_study import LOAD_CASES
+    from harness.physics.simulate import truth_polygon
+    from harness.protocol import Protocol
+
+    protocol = Protocol()
+    tip, yaw = LOAD_CASES
+    force = tip.forces[1]
+    scene = tip.scene(force)
+    settings, polygon = resolve(scene), truth_polygon(scene)
+    weight = GRAVITY * tip.density * polygon.area * settings.thickness
+    load = settings.load_factor * weight
+    (g1, g2) = tip.grasp()
+    rim = LineString([g1, g2]).intersection(polygon)
+    centre = 0.5 * (np.asarray(rim.coords[0]) + np.asarray(rim.coords[-1]))
+    reach = math.dist(centre, polygon.centroid.coords[0])
+    resist = force * patch_height(settings) + max(0.0, tip.friction * force - load / 2) * rim.length
+    assert tip.ratio(force, settings, protocol) == pytest.approx(load * reach / resist, rel=0.02)
+
+    force = yaw.forces[0]
+    scene = yaw.scene(force)
+    settings, polygon = resolve(scene), truth_polygon(scene)
+    mass = yaw.density * polygon.area * settings.thickness
+    inertia = yaw.density * settings.thickness * _polar_moment(polygon, np.zeros(2))
+    demand = inertia * protocol.shake_turn * (2 * math.pi * protocol.shake_frequency) ** 2
+    width = LineString(yaw.grasp()).intersection(polygon).length
+    across = math.sqrt((yaw.friction * force) ** 2 - (GRAVITY * mass / 2) ** 2)
+    assert yaw.ratio(force, settings, protocol) == pytest.approx(demand / (width * across + force * settings.jaw_width),
+                                                                 rel=0.02)
+
+
+def test_the_load_cases_lines_give_every_force_of_every_case():
+    from harness.bench.lift_study import _load_lines
+
+    point = {"force": 2.0, "ratio": 1.26, "slip": 0.78, "success": 0.0, "outcomes": {"slipped": 16},
+             "turn_median": 1.2, "p_l": 0.98, "p_f": 1.0}
+    res = {"engine": "pybullet", "trials_per_force": 16,
+           "rows": [{"case": "ring", "kind": "tip", "points": [point, {**point, "force": 4.0, "success": 1.0,
+                                                                        "outcomes": {"success": 16}}]}]}
+    lines = _load_lines(res)
+    assert len(lines) == 4 and "2.00 N  ratio 1.26" in lines[2] and "(slipped 16)" in lines[2]
+    assert "success 1.00" in lines[3] and "(" not in lines[3]

@@ -1,8 +1,9 @@
 """The lift model against the physics (``gpis-harness bench lift``): bars gripped across
 their width at growing offsets from their centre of mass, where the analytic P_L and the
 simulated success fall through 0.5; hang bars, which the weight turns in the plates, at
-growing lengths, where success falls as their hang nears the lifted table; and the
-friction levers Bullet's contact manifolds give the jaw plates on the library's trial set.
+growing lengths, where success falls as their hang nears the lifted table; two loads
+the model leaves out, at falling grip forces (LoadCase); and the friction levers
+Bullet's contact manifolds give the jaw plates on the library's trial set.
 
 A bar is a fully observed rectangle (its true shape: no shape uncertainty), so the
 offset is the only thing that changes along a sweep. Trials and the analytic estimate
@@ -21,13 +22,14 @@ from pathlib import Path
 import numpy as np
 
 from harness.grasp import SDFBatch
-from harness.lift import clearance
+from harness.lift import clearance, patch_height
 from harness.physics.simulate import make_trials, truth_polygon
 from harness.physics.engines import make_runner
 from harness.protocol import Protocol
 from harness.quality import EvaluationDraws, evaluate_draws
 from harness.scene import Scene, parse_scene
 from harness.seeding import stream
+from harness.settings import GRAVITY
 from harness.settings import resolve
 
 #: Approach noise of the sweeps (m): small, so that the offset is what varies.
@@ -77,11 +79,11 @@ class Bar:
 
 
 def _solid(name: str, shape: dict, thickness: float, density: float, friction: float, force: float,
-           source: str, cells: int = 40) -> Scene:
+           source: str, cells: int = 40, extent: float = 0.2) -> Scene:
     """A fully observed test object (a scene of ``shape``) on a grid of ``cells`` cells
-    over 20 cm (5 mm cells by default), with the built-in parallel jaw (10 cm opening, 1
-    cm plates) at ``force``."""
-    data = {"name": name, "grid": {"size": cells, "extent": 0.2}, "shape": shape, "sensor": {"noise": 0.0005},
+    over ``extent`` (20 cm: 5 mm cells by default), with the built-in parallel jaw (10 cm
+    opening, 1 cm plates) at ``force``."""
+    data = {"name": name, "grid": {"size": cells, "extent": extent}, "shape": shape, "sensor": {"noise": 0.0005},
             "physics": {"thickness": thickness, "density": density, "friction": friction},
             "gripper": {"opening": 0.1, "jaw_width": 0.01, "force": force}}
     return parse_scene(data, source, Path("."))
@@ -148,6 +150,97 @@ class SlideCase:
 #: The slide's controlled cases: 3 cm thick, 1000 kg/m^3, mu 0.2 (a friction cone of 11
 #: degrees), 20 N.
 SLIDES = (SlideCase("ring"), SlideCase("disk", radius=0.03))
+
+
+@dataclass(frozen=True)
+class LoadCase:
+    """An object gripped where its weight has no torque about the grasp axis, at falling
+    grip forces, for the two loads the model leaves out (docs/lift.md, "What it does not
+    model"). ``kind`` "tip": a ring (8 cm across, a 5 cm hole, 3 cm thick) gripped on its
+    rim along its radial line, one jaw in the hole, so that its centre of mass lies
+    beyond the plates along the closing line and the weight tips it about the horizontal
+    axis across that line. "yaw": a long light bar (35 cm x 2 cm x 3 cm) gripped at its
+    middle across its width, which the shake's turn about the vertical (``shake_turn`` at
+    ``shake_frequency``) loads about the vertical."""
+
+    kind: str
+    density: float
+    friction: float
+    forces: tuple
+
+    @property
+    def label(self) -> str:
+        what = ("ring 8 / 5 cm on its rim" if self.kind == "tip" else "bar 35 x 2 x 3 cm at its middle")
+        return f"{what}, {self.density:g} kg/m^3, mu {self.friction:g}"
+
+    def scene(self, force: float) -> Scene:
+        if self.kind == "tip":
+            return SlideCase("ring", self.friction, force, density=self.density).scene()
+        shape = {"type": "rectangle", "width": 0.35, "height": 0.02, "center": [0.0, 0.0]}
+        return _solid("bar", shape, 0.03, self.density, self.friction, force, f"<{self.label}, {force:g} N>",
+                      cells=80, extent=0.4)
+
+    def grasp(self) -> np.ndarray:
+        if self.kind == "tip":
+            return SlideCase("ring").grasp(0.0)
+        return np.array([[0.0, -0.01 - CLEARANCE], [0.0, 0.01 + CLEARANCE]])
+
+    def ratio(self, force: float, settings, protocol: Protocol) -> float:
+        """The load over the largest resistance rigid plates offer it before the object
+        moves (closed forms of the case's dimensions). "tip": the weight's moment about
+        the axis across the closing line at the grasp centre, lambda W r (r: the ring's
+        centre beyond the rim's middle), against the jaws' force F over the whole patch
+        height h (the pressure at the top of one plate and the bottom of the other) plus
+        the plates' unequal share of the load across the grasp width w,
+        (mu F - lambda W / 2) w. "yaw": the shake's moment about the vertical, I theta
+        omega^2, against the plates' friction across the grasp width,
+        w sqrt((mu F)^2 - (W / 2)^2), plus F times the plate's width (the pressure at
+        opposite edges of the two plates)."""
+        mu, t = self.friction, 0.03
+        if self.kind == "tip":
+            outer, hole = 0.04, 0.025
+            weight = GRAVITY * self.density * t * math.pi * (outer**2 - hole**2)
+            load = settings.load_factor * weight
+            resist = force * patch_height(settings) + max(0.0, mu * force - load / 2) * (outer - hole)
+            return load * 0.5 * (outer + hole) / resist
+        length, width = 0.35, 0.02
+        mass = self.density * t * length * width
+        demand = mass * (length**2 + width**2) / 12 * protocol.shake_turn * (2 * math.pi * protocol.shake_frequency)**2
+        across = math.sqrt(max(0.0, (mu * force)**2 - (GRAVITY * mass / 2)**2))
+        return demand / (width * across + force * settings.jaw_width)
+
+
+#: The loads' controlled cases: near the weight's slip at the weakest force, far from it
+#: at the strongest (docs/lift.md, "Loads the model leaves out").
+LOAD_CASES = (LoadCase("tip", 2000.0, 0.8, (1.75, 2.0, 2.5, 3.0, 4.0, 6.0, 10.0)),
+              LoadCase("yaw", 476.0, 0.5, (1.5, 1.75, 2.0, 2.5, 3.0, 4.0, 6.0)))
+
+
+def load_validate(cases=LOAD_CASES, trials: int = 12, seed: int = 0, engine: str = "pybullet") -> dict:
+    """Per case and grip force: the load ratio (LoadCase.ratio), the weight's share of
+    the plates' friction (lambda W / (2 mu F)), simulated success, the outcomes and the
+    median turn in the gripper (rad), and the analytic P_L and P_F."""
+    protocol = Protocol.of(engine)
+    rows = []
+    with make_runner(protocol) as runner:
+        for case in cases:
+            points = []
+            for force in case.forces:
+                scene = case.scene(force)
+                settings, approach, draws = _exact_draws(scene, max(trials, ANALYTIC_DRAWS), seed, "load", case.label,
+                                                         f"{force:g} N")
+                results = runner.run(make_trials(settings, case.grasp(), [truth_polygon(scene)], approach[:trials]))
+                analytic = evaluate_draws(case.grasp(), draws, settings)
+                polygon = truth_polygon(scene)
+                weight = GRAVITY * case.density * polygon.area * settings.thickness
+                points.append({"force": force, "ratio": case.ratio(force, settings, protocol),
+                               "slip": settings.load_factor * weight / (2 * case.friction * force),
+                               "success": float(np.mean([r.outcome == "success" for r in results])),
+                               "outcomes": dict(Counter(r.outcome for r in results)),
+                               "turn_median": float(np.median([r.pivot for r in results])),
+                               "p_l": float(analytic.lifted.mean()), "p_f": float(analytic.closure.mean())})
+            rows.append({"case": case.label, "kind": case.kind, "points": points})
+    return {"engine": engine, "trials_per_force": trials, "rows": rows}
 
 
 def _exact_draws(scene: Scene, n: int, seed: int, *keys):
@@ -591,9 +684,11 @@ def benchmark(settings: Settings = Settings()) -> dict:
             "hang": hang_validate(trials=settings.trials, seed=settings.seed),
             "hang_fine": hang_validate(trials=settings.trials, seed=settings.seed, finer=HANG_FINER),
             "manifold_levers": manifold_levers(seed=settings.seed),
+            "loads": load_validate(trials=settings.trials, seed=settings.seed),
             "mujoco": {**validate(trials=settings.trials, seed=settings.seed, engine="mujoco"),
                        "slide": validate(SLIDES, trials=settings.trials, seed=settings.seed, engine="mujoco"),
-                       "hang": hang_validate(trials=settings.trials, seed=settings.seed, engine="mujoco")}}
+                       "hang": hang_validate(trials=settings.trials, seed=settings.seed, engine="mujoco"),
+                       "loads": load_validate(trials=settings.trials, seed=settings.seed, engine="mujoco")}}
 
 
 def format_lines(res: dict) -> list[str]:
@@ -608,12 +703,31 @@ def format_lines(res: dict) -> list[str]:
     lines.append(f"Bullet's manifold levers on {m['plates']} plates of the library trial set, as fractions of the "
                  f"largest admissible lever: quartiles {q[0]:.2f} / {q[1]:.2f} / {q[2]:.2f} (uniform: 0.25 / 0.50 / "
                  f"0.75), {m['single_point']:.0%} held by one point, {m['beyond_largest']:.1%} beyond the largest")
+    if "loads" in res:
+        lines += _load_lines(res["loads"])
     if "mujoco" in res:
         lines += ["", "the same bars in MuJoCo:", *_bar_lines(res["mujoco"])]
         if "slide" in res["mujoco"]:
             lines += _slide_lines(res["mujoco"]["slide"])
         if "hang" in res["mujoco"]:
             lines += _hang_lines(res["mujoco"]["hang"])
+        if "loads" in res["mujoco"]:
+            lines += _load_lines(res["mujoco"]["loads"])
+    return lines
+
+
+def _load_lines(res: dict) -> list[str]:
+    """Per load case and grip force: the load ratio, the weight's share of the friction,
+    success, the median turn in the gripper, P_L, and the outcomes."""
+    lines = [f"loads the model leaves out ({res['engine']}, {res['trials_per_force']} trials per force): "
+             f"grip force (N), load ratio, the weight's share of the friction, success, median turn (rad), P_L"]
+    for r in res["rows"]:
+        lines.append(f"  {r['case']} ({r['kind']}):")
+        for p in r["points"]:
+            fails = ", ".join(f"{k} {v}" for k, v in sorted(p["outcomes"].items()) if k != "success")
+            lines.append(f"    {p['force']:5.2f} N  ratio {p['ratio']:4.2f}  share {p['slip']:4.2f}  success "
+                         f"{p['success']:4.2f}  turn {p['turn_median']:4.2f}  P_L {p['p_l']:4.2f}"
+                         + (f"  ({fails})" if fails else ""))
     return lines
 
 
