@@ -168,7 +168,7 @@ def _quality(args) -> int:
         print(f"{scene.name}: P_F = {est.p_f:.3f} (95% CI {est.ci_low:.3f} to {est.ci_high:.3f}), "
               f"P_L = {est.p_l:.3f} (95% CI {est.p_l_ci_low:.3f} to {est.p_l_ci_high:.3f}) over "
               f"{est.samples} draws, sigma_g = {settings.sigma_g:g} m, friction = {settings.friction:g}")
-        print(f"failures: {fails}; the plates' squeeze closed {est.squeezed} draws out of force closure; "
+        print(f"failures: {fails}; the plates' squeeze settled {est.squeezed} draws out of force closure; "
               f"the weight turned the object in {est.pivots} draws; "
               f"mean Ferrari-Canny quality {est.ferrari_canny_mean:.4f}")
     return 0

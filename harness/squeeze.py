@@ -1,7 +1,8 @@
 """The plates' squeeze: a draw whose contacts are not in force closure turns on the table
 under the plates' couple until they are (or it cannot), and failing that slides across
-the closing line where the walls lean from the plates, the lift model's planar step
-(docs/lift.md, "The squeeze" and "The slide")."""
+the closing line where the walls lean from the plates, until they are or until the
+walls' pushes across that line cancel, a position the plates hold in the plane; the
+lift model's planar step (docs/lift.md, "The squeeze" and "The slide")."""
 
 from __future__ import annotations
 
@@ -35,9 +36,11 @@ SLIDE_LIMIT = 0.02
 
 @dataclass(frozen=True)
 class Squeeze:
-    """Per draw (B,): whether the squeeze brought the plates into force closure, the turn
-    (rad) or the slide (m) that did (0 where it did not) and the contacts where it stopped (the first contacts
-    for draws in closure at once, or not squeezed into it): c1, c2, w1, w2, edge1, edge2."""
+    """Per draw (B,): whether the squeeze settled the object between the plates (brought
+    them into force closure, or slid the object to where the walls' pushes across the
+    closing line cancel: held in the plane), the turn (rad) or the slide (m) that did (0
+    where it did not) and the contacts where it stopped (the first contacts for draws in
+    closure at once, or not settled): c1, c2, w1, w2, edge1, edge2."""
 
     squeezed: np.ndarray
     turn: np.ndarray
@@ -70,7 +73,9 @@ def squeeze(fields: SDFBatch, g1, g2, field_index, contacts: Contacts, closure, 
     a contact is lost (a plate slid off the object, or meets it within SQUEEZE_MARGIN of
     where it starts looking), or the turn reaches ``limit``. A draw the turn does not
     bring into closure then slides from its first contacts (:func:`_slide`), up to
-    ``slide_limit`` (m; 0 turns only). friction: float or (B,) coefficients.
+    ``slide_limit`` (m; 0 turns only), unless neither the couple nor the walls' push
+    across u acts there: then the plates hold it in the plane where it is. friction:
+    float or (B,) coefficients.
     """
     g1 = np.asarray(g1, dtype=float)
     g2 = np.asarray(g2, dtype=float)
@@ -97,6 +102,10 @@ def squeeze(fields: SDFBatch, g1, g2, field_index, contacts: Contacts, closure, 
         reversed_ = ~lost & (_couple(*_pushes(found), h1, h2) != turning[idx])
         out.turn[idx[closed]] = angle
         active[idx[closed | lost | reversed_]] = False
+    # Neither a couple nor a push across u at the first contacts: the plates' pushes
+    # balance there, and the object stays where it is, held in the plane.
+    balanced = candidates & (turning == 0) & (_across(contacts, g1, g2, PATCH_DEPTH / jaw_width) == 0)
+    out.squeezed[balanced] = True
     _slide(fields, g1, g2, field_index, contacts, candidates & ~out.squeezed, friction, com, jaw_width, torque_scale,
            out, slide_limit)
     return out
@@ -111,8 +120,13 @@ def _slide(fields: SDFBatch, g1, g2, field_index, contacts: Contacts, active, fr
     through the closure test at each step. In the object's frame the jaws move the other
     way; the contacts are found again each
     SLIDE_STEP until the plates are in force closure (slid into it), the push across u
-    changes sign or vanishes (a position the walls hold out of closure), a contact is
-    lost (the object slid out of the jaws) or the slide reaches ``limit``."""
+    changes sign or vanishes, a contact is lost (the object slid out of the jaws) or the
+    slide reaches ``limit``. Where the push changes sign or vanishes, the walls hold the
+    object in the plane out of force closure: the plates' pushes along u balance there,
+    any shift across u brings back a push towards it, and the lift asks the plates for
+    friction along the walls (the weight) and about u (its torque), not for planar
+    closure. Such a draw is settled too (``out.squeezed``), and the lift is judged at
+    those contacts (docs/lift.md, "The slide")."""
     flush = PATCH_DEPTH / jaw_width
     sense = _across(contacts, g1, g2, flush)
     active = active & (sense != 0)
@@ -126,8 +140,9 @@ def _slide(fields: SDFBatch, g1, g2, field_index, contacts: Contacts, active, fr
         move = -(sense[idx] * shift)[:, None] * across[idx]
         found, h1, h2, closed, lost = _settle(fields, g1[idx] + move, u[idx], idx, last1, last2, field_index,
                                               friction, com, jaw_width, torque_scale, out)
-        stopped = ~lost & (_across(found, h1, h2, flush) != sense[idx])
-        out.shift[idx[closed]] = shift
+        stopped = ~lost & ~closed & (_across(found, h1, h2, flush) != sense[idx])
+        _keep(out, idx[stopped], found, stopped)
+        out.shift[idx[closed | stopped]] = shift
         active[idx[closed | lost | stopped]] = False
 
 
@@ -145,11 +160,15 @@ def _settle(fields: SDFBatch, h1, u, idx, last1, last2, field_index, friction, c
     found = find_contacts(fields, h1, h2, jaw_width, field_index=field_index[idx])
     closed, _ = plate_closure(found, friction[idx], com[idx], torque_scale, with_quality=False)
     last1[idx], last2[idx] = found.c1, found.c2
-    done = idx[closed]
+    _keep(out, idx[closed], found, closed)
+    return found, h1, h2, closed, found.status != OK
+
+
+def _keep(out: Squeeze, done, found: Contacts, which) -> None:
+    """Record draws ``done`` as settled, with the contacts ``found[which]``."""
     out.squeezed[done] = True
     for name in _KEPT:
-        getattr(out, name)[done] = getattr(found, name)[closed]
-    return found, h1, h2, closed, found.status != OK
+        getattr(out, name)[done] = getattr(found, name)[which]
 
 
 def _across(contacts: Contacts, g1, g2, flush: float) -> np.ndarray:

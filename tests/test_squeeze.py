@@ -10,6 +10,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 import shapely
+import shapely.affinity
 
 from harness.geometry import Grid, grid_sdf, grid_sdf_gradient
 from harness.grasp import SDFBatch, find_contacts, plate_closure
@@ -218,6 +219,59 @@ def test_a_ring_gripped_on_its_rim_off_its_radial_line_slides_into_force_closure
     assert not without.squeezed[0]
 
 
+def test_on_slippery_jaws_the_ring_slides_to_where_the_walls_pushes_cancel_and_is_held_there(ring):
+    """At mu = 0.1 no grasp of the ring's rim within 8 mm of its radial line is in force
+    closure (the plate in the hole meets its wall by its edges, 11.5 degrees off, beyond
+    the cone's 5.7). The walls push the ring sideways until their pushes across the
+    closing line change sign; there the plates' pushes balance and any shift brings a
+    push back (the ring is held in the plane), found here by judging the walls' push at
+    every shifted grasp on its own. The slide stops there and the lift is judged at
+    those contacts; on the radial line itself nothing pushes and the ring stays."""
+    from harness.squeeze import SLIDE_STEP, _across
+
+    mu, offset = 0.1, 0.008
+    flush = 0.0005 / JAW
+    g1, g2 = rim(offset)
+    contacts, closed = closes(ring, g1, g2, mu)
+    assert not closed[0]
+    shifts = np.arange(1, int(round(offset / SLIDE_STEP)) + 2) * SLIDE_STEP
+    assert not any(closes(ring, *rim(offset - s), mu)[1][0] for s in shifts)
+    start = _across(contacts, g1, g2, flush)[0]
+    pushes = [_across(closes(ring, *rim(offset - s), mu)[0], *rim(offset - s), flush)[0] for s in shifts]
+    expected = shifts[next(k for k, p in enumerate(pushes) if p != start)]
+    assert abs(expected - offset) <= SLIDE_STEP
+    out = squeeze(ring, g1, g2, 0, contacts, closed, mu, JAW, 0.05, slide_limit=0.1)
+    assert out.squeezed[0] and out.shift[0] == pytest.approx(expected, abs=1e-9)
+    settled, _ = closes(ring, *rim(offset - expected), mu)
+    np.testing.assert_allclose(out.c1[0], settled.c1[0], atol=1e-9)
+    np.testing.assert_allclose(out.c2[0], settled.c2[0], atol=1e-9)
+    on_line, closed = closes(ring, *rim(0.0), mu)  # the first contact: one of the plate's two edges
+    stays = squeeze(ring, *rim(0.0), 0, on_line, closed, mu, JAW, 0.05, slide_limit=0.1)
+    assert not closed[0] and stays.squeezed[0] and stays.shift[0] <= SLIDE_STEP + 1e-12
+
+
+def test_the_plates_hold_a_draw_where_neither_a_couple_nor_a_push_acts():
+    """A square gripped across its diagonal, its corners in the plates' middles: both
+    plates meet corners, the first contacts' normals (the corners' bisectors) lie along
+    the closing line, so at mu = 0 the grasp is out of force closure (frictionless
+    contacts cannot resist a turn about the centre) and yet no couple turns the square
+    and no wall pushes it across: the plates hold it where it is."""
+    from harness.squeeze import _across, _couple, _pushes
+
+    side = 0.03
+    square = shapely.Polygon([(-side / 2, -side / 2), (side / 2, -side / 2), (side / 2, side / 2),
+                              (-side / 2, side / 2)])
+    turned = shapely.affinity.rotate(square, 45.0, origin=(0, 0))
+    fields = SDFBatch(GRID, grid_sdf(turned, GRID)[None], grid_sdf_gradient(turned, GRID)[None])
+    g1, g2 = np.array([[0.0, -0.045]]), np.array([[0.0, 0.045]])
+    contacts, closed = closes(fields, g1, g2, 0.0)
+    assert not closed[0]
+    assert _couple(*_pushes(contacts), g1, g2)[0] == 0.0 and _across(contacts, g1, g2, 0.0005 / JAW)[0] == 0.0
+    out = squeeze(fields, g1, g2, 0, contacts, closed, 0.0, JAW, 0.05)
+    assert out.squeezed[0] and out.turn[0] == 0.0 and out.shift[0] == 0.0
+    np.testing.assert_array_equal(out.c1, contacts.c1)
+
+
 def test_a_disk_gripped_off_centre_by_the_plates_edges_slides_out_of_the_jaws(ring):
     """A disk gripped 16 mm off its centre by 10 mm plates meets them by their inner
     edges, its walls leaning 11 degrees from the plates, beyond mu = 0.1: they push the
@@ -253,11 +307,13 @@ def test_bench_lifts_slide_cases_judged_by_the_model():
     """bench lift's slide cases, their model side (the physics is the bench's): the ring
     gripped 8 mm off its radial line is out of force closure at the first contacts on
     nearly every draw (sigma_g 1 mm) and slides into it on every one; the disk gripped 16
-    mm off its centre slides out of the jaws on every draw."""
+    mm off its centre slides out of the jaws on every draw; on slippery jaws (mu 0.1) the
+    ring is out of force closure on every draw and held where the walls' pushes cancel."""
     from harness.bench.lift_study import SLIDES, _exact_draws
 
-    ring_case, disk_case = SLIDES
-    for case, offset, p_f, p_l in ((ring_case, 0.008, 0.0, 1.0), (disk_case, 0.016, 0.0, 0.0)):
+    ring_case, disk_case, slippery_ring = SLIDES
+    for case, offset, p_f, p_l in ((ring_case, 0.008, 0.0, 1.0), (disk_case, 0.016, 0.0, 0.0),
+                                   (slippery_ring, 0.008, 0.0, 1.0)):
         scene = case.scene()
         settings, _, draws = _exact_draws(scene, 100, 0, case.label)
         out = evaluate_draws(case.grasp(offset), draws, settings)
