@@ -162,8 +162,8 @@ class QualityEstimate:
     reasons' draws and the squeezed ones, except where a sample's small pieces hold a
     draw for P_F that misses the body for P_L), the draws whose weight turned the object about
     the grasp axis (lifted or not), the mean Ferrari-Canny quality (0 for a failed draw),
-    and the draws out of force closure that the plates' squeeze brought into it (so P_L
-    may exceed P_F; harness.squeeze)."""
+    and the draws out of force closure that the plates' squeeze brought into it or holds
+    in the plane (so P_L may exceed P_F; harness.squeeze)."""
 
     p_f: float
     ci_low: float
@@ -187,13 +187,13 @@ class QualityEstimate:
 @dataclass(frozen=True)
 class DrawOutcomes:
     """Per-draw results (G, n) for G grasps: force closure (the paper's, at the first
-    contacts), lifted (force closure at once or after the plates' squeeze, and the
-    lift; None when the lift was not judged), failure reason index into FAILURE_REASONS
+    contacts), lifted (force closure at once or after the plates' squeeze, or held in
+    the plane by it, and the lift; None when the lift was not judged), failure reason index into FAILURE_REASONS
     (-1 for lifted, or for force closure without the lift), whether the weight turned
     the object, the Ferrari-Canny quality, the lift's chance averaged over the levers (0
     out of force closure; None when the lift was not judged), and whether the squeeze
-    brought the plates into force closure (harness.squeeze; never when the lift was not
-    judged). ``lift_inputs``, when asked for (:func:`evaluate_draws`), holds the lift
+    settled the draw (into force closure, or held in the plane: harness.squeeze; never
+    when the lift was not judged). ``lift_inputs``, when asked for (:func:`evaluate_draws`), holds the lift
     model's inputs and intermediates per draw (:data:`LIFT_INPUTS`; NaN where the plates
     were not in force closure, so the lift was not judged)."""
 
@@ -247,10 +247,11 @@ def evaluate_draws(grasps, draws: EvaluationDraws, settings: GraspSettings, lift
     shape (too_wide), when no object lies between the jaws (missed), when a contact
     normal is undefined (degenerate_normal), when the plates' contact patches are not in
     force closure (friction_cone; harness.grasp.plate_closure) and, with the lift, the
-    plates' squeeze does not turn them into it either (harness.squeeze), and then, in
-    force closure, when the weight slides the object out (weight_slip) or turns it back
-    onto the table (weight_torque) (harness.lift, with the shape sample's area and centre
-    of mass and draw i's pressure deviates, at the contacts where the squeeze stopped).
+    plates' squeeze does not bring them into it nor hold the object in the plane either
+    (harness.squeeze), and then, in force closure or so held, when the weight slides the
+    object out (weight_slip) or turns it back onto the table (weight_torque) (harness.lift,
+    with the shape sample's area and centre of mass and draw i's pressure deviates, at the
+    contacts where the squeeze stopped).
     With the lift, the reasons are judged on the shape sample's body, the largest region
     the physics extrudes: on a sample in several pieces the jaws pass where the other
     pieces would be (harness.grasp.body_fields), so a draw P_F holds on a small piece is
