@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 from collections import Counter
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -29,8 +29,7 @@ from harness.protocol import Protocol
 from harness.quality import EvaluationDraws, evaluate_draws
 from harness.scene import Scene, parse_scene
 from harness.seeding import stream
-from harness.settings import GRAVITY
-from harness.settings import resolve
+from harness.settings import GRAVITY, resolve
 
 #: Approach noise of the sweeps (m): small, so that the offset is what varies.
 SIGMA_G = 0.001
@@ -169,6 +168,13 @@ class LoadCase:
     density: float
     friction: float
     forces: tuple
+    #: The "yaw" bar's length and width (m); both cases are 3 cm thick.
+    bar: tuple = (0.35, 0.02)
+    thickness: float = 0.03
+
+    @property
+    def ring(self) -> SlideCase:
+        return SlideCase("ring", self.friction, density=self.density, thickness=self.thickness)
 
     @property
     def label(self) -> str:
@@ -177,15 +183,17 @@ class LoadCase:
 
     def scene(self, force: float) -> Scene:
         if self.kind == "tip":
-            return SlideCase("ring", self.friction, force, density=self.density).scene()
-        shape = {"type": "rectangle", "width": 0.35, "height": 0.02, "center": [0.0, 0.0]}
-        return _solid("bar", shape, 0.03, self.density, self.friction, force, f"<{self.label}, {force:g} N>",
-                      cells=80, extent=0.4)
+            return replace(self.ring, force=force).scene()
+        length, width = self.bar
+        shape = {"type": "rectangle", "width": length, "height": width, "center": [0.0, 0.0]}
+        return _solid("bar", shape, self.thickness, self.density, self.friction, force,
+                      f"<{self.label}, {force:g} N>", cells=80, extent=0.4)
 
     def grasp(self) -> np.ndarray:
         if self.kind == "tip":
-            return SlideCase("ring").grasp(0.0)
-        return np.array([[0.0, -0.01 - CLEARANCE], [0.0, 0.01 + CLEARANCE]])
+            return self.ring.grasp(0.0)
+        half = 0.5 * self.bar[1] + CLEARANCE
+        return np.array([[0.0, -half], [0.0, half]])
 
     def ratio(self, force: float, settings, protocol: Protocol) -> float:
         """The load over the largest resistance rigid plates offer it before the object
@@ -198,15 +206,14 @@ class LoadCase:
         omega^2, against the plates' friction across the grasp width,
         w sqrt((mu F)^2 - (W / 2)^2), plus F times the plate's width (the pressure at
         opposite edges of the two plates)."""
-        mu, t = self.friction, 0.03
+        mu = self.friction
         if self.kind == "tip":
-            outer, hole = 0.04, 0.025
-            weight = GRAVITY * self.density * t * math.pi * (outer**2 - hole**2)
-            load = settings.load_factor * weight
+            outer, hole = self.ring.radius, self.ring.hole
+            load = settings.load_factor * GRAVITY * self.ring.mass
             resist = force * patch_height(settings) + max(0.0, mu * force - load / 2) * (outer - hole)
             return load * 0.5 * (outer + hole) / resist
-        length, width = 0.35, 0.02
-        mass = self.density * t * length * width
+        length, width = self.bar
+        mass = self.density * self.thickness * length * width
         demand = mass * (length**2 + width**2) / 12 * protocol.shake_turn * (2 * math.pi * protocol.shake_frequency)**2
         across = math.sqrt(max(0.0, (mu * force)**2 - (GRAVITY * mass / 2)**2))
         return demand / (width * across + force * settings.jaw_width)
@@ -231,9 +238,9 @@ def load_validate(cases=LOAD_CASES, trials: int = 12, seed: int = 0, engine: str
                 scene = case.scene(force)
                 settings, approach, draws = _exact_draws(scene, max(trials, ANALYTIC_DRAWS), seed, "load", case.label,
                                                          f"{force:g} N")
-                results = runner.run(make_trials(settings, case.grasp(), [truth_polygon(scene)], approach[:trials]))
-                analytic = evaluate_draws(case.grasp(), draws, settings)
                 polygon = truth_polygon(scene)
+                results = runner.run(make_trials(settings, case.grasp(), [polygon], approach[:trials]))
+                analytic = evaluate_draws(case.grasp(), draws, settings)
                 weight = GRAVITY * case.density * polygon.area * settings.thickness
                 points.append({"force": force, "ratio": case.ratio(force, settings, protocol),
                                "slip": settings.load_factor * weight / (2 * case.friction * force),
