@@ -11,12 +11,15 @@ the GP's shape samples depend on how many are drawn) and judges each executed pl
 the first posterior-trials draws with the lift model's quantities kept
 (:data:`harness.quality.LIFT_INPUTS`). Every row's verdict is checked against the one
 the ledger recorded during the run (runs recorded before the ledger kept verdicts are
-not checked); a mismatch (a scene file changed since the run, or another version of the
-model) is refused, not written.
+not checked); a mismatch (a scene file changed since the run, another version of the
+model, or, from a script, numeric code paths other than the run's: a draw on a knife
+edge follows the last bit of the shape sampler's products) is refused, not written, with
+the cause named when it is the code paths.
 """
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -68,13 +71,28 @@ def trial_draws(out_dir: Path, data: dict | None = None) -> pd.DataFrame:
             if ledger and _reasons(verdicts[:len(ledger)]) != _reasons(ledger):
                 raise InputError(str(out_dir), "analytic.reasons",
                                  f"{name} realisation {realisation} {plan['planner']}: the verdicts drawn again "
-                                 "differ from the ledger's (a scene or the model changed since the run)")
+                                 f"differ from the ledger's ({_why_different(data)})")
             for k in range(n):
                 trial = post.loc[key + (k,)] if key + (k,) in post.index else None
                 rows.append((name, realisation, plan["planner"], k,
                              None if trial is None else trial.outcome, np.nan if trial is None else trial.pivot,
                              verdicts[k], *(float(out.lift_inputs[q][0, k]) for q in LIFT_INPUTS)))
     return pd.DataFrame(rows, columns=[*KEYS, *LIFT_INPUTS])
+
+
+def _why_different(data: dict) -> str:
+    """Why a cell drawn again may judge a draw otherwise than the run did: the run's
+    numeric code paths (harness.provenance.CODE_PATHS, recorded in its environment) when
+    this process's differ (a draw on a knife edge follows the last bit of the shape
+    sampler's products), else a changed scene file or model."""
+    from harness.provenance import CODE_PATHS
+
+    recorded = (data.get("environment", {}).get("reproducibility") or {}).get("code_paths")
+    here = {name: os.environ.get(name) for name in CODE_PATHS}
+    if recorded is not None and recorded != here:
+        return (f"the run's numeric code paths were {recorded}, this process's are {here}: set them before "
+                "numpy is imported, as the gpis-harness command does (docs/experiments.md, 'Pinned code paths')")
+    return "a scene or the model changed since the run"
 
 
 def _reasons(labels: list[str]) -> list[str]:

@@ -479,7 +479,13 @@ def test_report_draws_refuses_verdicts_that_are_not_the_ledgers(tiny_run):
     labels = data["analytic"].at[first, "reasons"].split(",")
     labels[0] = "missed" if labels[0] != "missed" else "lifted"
     data["analytic"].at[first, "reasons"] = ",".join(labels)
-    with pytest.raises(InputError, match="analytic.reasons"):
+    with pytest.raises(InputError, match="analytic.reasons.*a scene or the model changed"):
+        trial_draws(out, data)
+    # A run made under other numeric code paths (a script that imported numpy before
+    # setting them) is told so, not that its model changed.
+    recorded = data["environment"]["reproducibility"]
+    recorded["code_paths"] = {name: "elsewhere" for name in recorded["code_paths"]}
+    with pytest.raises(InputError, match="numeric code paths were .*elsewhere"):
         trial_draws(out, data)
     gone = load(out)
     gone["config"]["scenes"] = [str(out / "moved.toml") for _ in gone["config"]["scenes"]]
