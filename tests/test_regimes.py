@@ -132,6 +132,29 @@ def test_outputs_and_the_command_line(sweep, tmp_path):
     assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1 and "--engines" in bad.stderr
 
 
+def test_plans_stopped_at_their_budget_are_counted_and_reported(sweep):
+    """A plan that stopped at its time budget depends on how fast the machine ran it: each
+    row counts its part's such plans (none in the tiny sweep, whose plans finish on their
+    own), and the text report names the regimes and parts that have any."""
+    out, result = sweep
+    assert all(r["budget_stops"] == 0 for r in result["rows"])
+    assert "stopped at their time budget" not in "\n".join(rs.format_lines(result))
+    regime = REGIMES[0]
+    data = load(out / "pybullet" / regime.name)
+    plans = data["plans"]
+    stopped = plans.index[plans.scene == plans.scene.iloc[0]][:2]
+    data["plans"].loc[stopped, "status"] = "budget"
+    names = sorted(plans.scene.unique())
+    row = rs._regime_row(data, names)
+    assert row["budget_stops"] == 2
+    assert rs._regime_row(data, [n for n in names if n != plans.scene.iloc[0]])["budget_stops"] == 0
+    rows = [dict(r, budget_stops=2) if r["regime"] == regime.name and r["part"] == "all" else r
+            for r in result["rows"]]
+    rows.append({**rows[0], "regime": regime.name, "part": "design", "budget_stops": 2})
+    line = [t for t in rs.format_lines({**result, "rows": rows}) if "stopped at their time budget" in t]
+    assert len(line) == 1 and line[0].endswith(f": {regime.name} design 2")  # the 'all' part is not repeated
+
+
 def test_verdict_rows_agree_with_the_draws_judged_again(sweep):
     """verdicts.csv: per engine, regime and part, the trials of each verdict sum to the
     part's posterior trials, and each verdict's count and success equal those found by
