@@ -134,10 +134,30 @@ def test_a_trial_is_the_same_alone_in_a_batch_and_twice():
 def test_a_process_keeps_as_many_compiled_models_as_built_bodies():
     """A least-recently-used cache smaller than the shapes a process cycles through
     misses on every trial: with 128 models and `bench physics`' 130 shapes, every pass
-    compiled every shape again. The models' cache holds as many as the bodies' does."""
+    compiled every shape again. The models' cache holds as many as the bodies' does, and
+    the models' layouts (indices and spare data) as many as the models."""
     from harness.physics.bodies import recipe
 
     assert me.compiled.cache_info().maxsize >= recipe.cache_info().maxsize >= 130
+    assert me._layout.cache_info().maxsize >= me.compiled.cache_info().maxsize
+
+
+def test_a_model_lends_its_data_to_one_trial_at_a_time():
+    """A finished trial leaves its MjData to the next trial of the same model, reset to
+    the model's initial state (mj_resetData, as a new MjData is); a trial that starts
+    while another holds the data gets data of its own. Rows are the same either way
+    (test_a_trial_is_the_same_alone_in_a_batch_and_twice runs the same trials again on
+    lent data)."""
+    trial = _rectangle_trials((-0.045, 0.0), (0.045, 0.0))[0]
+    runner = me.MujocoRunner(MUJOCO)
+    first, second = me._Slot(runner, trial), me._Slot(runner, trial)
+    assert first.layout is second.layout and first.data is not second.data
+    first.layout.give(first.data)
+    mujoco.mj_step(first.model, first.data)  # a state that the next trial must not see
+    third = me._Slot(runner, trial)
+    assert third.data is first.data
+    assert third.data.time == 0.0 and np.array_equal(third.data.qpos, second.data.qpos)
+    assert np.array_equal(third.data.qvel, second.data.qvel) and not third.data.qacc_warmstart.any()
 
 
 def test_the_mujoco_engine_refuses_a_gripper_it_cannot_build():

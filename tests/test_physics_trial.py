@@ -214,3 +214,21 @@ def test_contact_clipping_holds_the_swinging_hang_bar_as_a_four_times_finer_step
         with make_runner(protocol) as runner:
             outcomes = [r.outcome for r in runner.run(trials)]
         assert outcomes.count("success") >= 15, (protocol.time_step, protocol.convex_clipping, outcomes)
+
+
+def test_the_interleaved_timing_runs_every_trial_in_both_engines_as_a_plain_run_does():
+    """bench physics' interleaved timing: each round runs every trial in both engines,
+    block by block in turn, with the bodies built; its results are those of a plain run
+    of each engine (blocks of Bullet's batch size keep Bullet's batches), and it times
+    every round of each engine."""
+    from harness.bench.physics_study import interleaved, library_trials
+
+    trials = library_trials(grasps_per_scene=2, ranked=False).trials[:32]
+    protocols = (Protocol(), Protocol.of("mujoco"))
+    seconds, results = interleaved(trials, protocols, rounds=2, block=16)
+    assert seconds.shape == (2, 2) and (seconds > 0).all()
+    for protocol, got in zip(protocols, results):
+        with make_runner(protocol) as runner:
+            plain = runner.run(trials)
+        assert [repr(r.as_dict()) for r in got] == [repr(r.as_dict()) for r in plain]
+    assert {r.outcome for r in results[1]} - {"approach_collision", "empty_shape"}  # some were simulated

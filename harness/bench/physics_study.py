@@ -123,6 +123,37 @@ def run_naive(trials: list[Trial], protocol: Protocol) -> Timed:
     return Timed(results, time.perf_counter() - start)
 
 
+#: Trials per block and rounds of the interleaved timing (:func:`interleaved`); a block is
+#: three of Bullet's batches of 16, so its batches are those of a run over every trial.
+INTERLEAVE_BLOCK = 48
+INTERLEAVE_ROUNDS = 3
+
+
+def interleaved(trials: list[Trial], protocols: tuple[Protocol, Protocol], rounds: int = INTERLEAVE_ROUNDS,
+                block: int = INTERLEAVE_BLOCK) -> tuple[np.ndarray, list[list[TrialResult]]]:
+    """Seconds (rounds, 2) each of two engines takes over the same trials, with every
+    shape's body or model built first, the trials run block by block in the two engines
+    in turn (which engine runs a block first alternates): on a shared machine whose speed
+    drifts during a run, the drift falls on both engines alike, where timing one engine's
+    whole pass and then the other's lets it fall on one. Also each engine's results of
+    the last round."""
+    seconds = np.zeros((rounds, 2))
+    with make_runner(protocols[0]) as first, make_runner(protocols[1]) as second:
+        runners = (first, second)
+        for runner in runners:
+            runner.run(trials)
+        results: list[list[TrialResult]] = [[], []]
+        for r in range(rounds):
+            results = [[], []]
+            for k, start in enumerate(range(0, len(trials), block)):
+                chunk = trials[start:start + block]
+                for e in ((0, 1) if (r + k) % 2 == 0 else (1, 0)):
+                    t0 = time.perf_counter()
+                    results[e] += runners[e].run(chunk)
+                    seconds[r, e] += time.perf_counter() - t0
+    return seconds, results
+
+
 def agreement(a: list[TrialResult], b: list[TrialResult]) -> float:
     """Fraction of trials with the same outcome."""
     return float(np.mean([x.outcome == y.outcome for x, y in zip(a, b, strict=True)]))
@@ -156,7 +187,8 @@ def benchmark(settings: Settings = Settings()) -> dict:
     step; the same for MuJoCo on the same trials in the same run (its trials per second
     over Bullet's batched runner, its agreement with its own 4x finer step and with
     Bullet, trial by trial); and both engines' rates on a second pass over the trials,
-    with the shapes' bodies and models built in the first (each pass's results the same)."""
+    with the shapes' bodies and models built in the first, and timed block by block in
+    turn (:func:`interleaved`; each pass's results the same)."""
     from harness.physics.simulate import outcome_counts
 
     trials = library_trials(settings.grasps_per_scene, settings.seed).trials
@@ -170,14 +202,23 @@ def benchmark(settings: Settings = Settings()) -> dict:
     # this process, as in an experiment, where every planner's trials meet the same
     # posterior samples.
     batched_again, mujoco_again = run_batched(trials, protocol), run_batched(trials, mj)
-    if [r.as_dict() for r in mujoco_again.results] != [r.as_dict() for r in mujoco.results] \
-            or [r.as_dict() for r in batched_again.results] != [r.as_dict() for r in batched.results]:
-        raise RuntimeError("a second pass over the same trials gave other results")
+    # Both engines again, block by block in turn, so that the machine's drift falls on both.
+    turns, turn_results = interleaved(trials, (protocol, mj))
+    same = [[r.as_dict() for r in x.results] for x in (batched, mujoco)]
+    if [[r.as_dict() for r in x.results] for x in (batched_again, mujoco_again)] != same \
+            or [[r.as_dict() for r in x] for x in turn_results] != same:
+        raise RuntimeError("another pass over the same trials gave other results")
+    per_round = turns[:, 0] / turns[:, 1]
     return {
         "mujoco": {"time_step": mj.time_step, "solver_iterations": mj.solver_iterations,
                    "trials_per_s": mujoco.rate, "over_pybullet": mujoco.rate / batched.rate,
                    "trials_per_s_built": mujoco_again.rate,
                    "over_pybullet_built": mujoco_again.rate / batched_again.rate,
+                   "interleaved": {"rounds": len(turns), "block": INTERLEAVE_BLOCK,
+                                   "pybullet_trials_per_s": len(trials) * len(turns) / float(turns[:, 0].sum()),
+                                   "trials_per_s": len(trials) * len(turns) / float(turns[:, 1].sum()),
+                                   "over_pybullet": float(turns[:, 0].sum() / turns[:, 1].sum()),
+                                   "over_pybullet_per_round": [float(x) for x in per_round]},
                    "fine_step_agreement": agreement(mujoco.results, mujoco_fine.results),
                    "fine_step_disagreements": confusion(mujoco.results, mujoco_fine.results),
                    "agreement_with_pybullet": agreement(mujoco.results, batched.results),
@@ -209,6 +250,10 @@ def format_lines(res: dict) -> list[str]:
             f"iterations, {mj['trials_per_s']:.2f} trials/s, {mj['over_pybullet']:.2f}x Bullet's batched "
             f"runner; a second pass with the bodies built: {mj['trials_per_s_built']:.2f} against "
             f"{res['batched_trials_per_s_built']:.2f}, {mj['over_pybullet_built']:.2f}x; "
+            f"block by block in turn ({mj['interleaved']['rounds']} rounds): {mj['interleaved']['trials_per_s']:.2f} "
+            f"against {mj['interleaved']['pybullet_trials_per_s']:.2f}, {mj['interleaved']['over_pybullet']:.2f}x "
+            f"(rounds {min(mj['interleaved']['over_pybullet_per_round']):.2f}-"
+            f"{max(mj['interleaved']['over_pybullet_per_round']):.2f}x); "
             f"agreement with a 4x finer step {mj['fine_step_agreement']:.3f}, with Bullet "
             f"{mj['agreement_with_pybullet']:.3f}",
             "MuJoCo outcomes: " + ", ".join(f"{k} {v}" for k, v in mj["outcomes"].items() if v)

@@ -31,7 +31,7 @@ from shapely.geometry import Polygon
 
 from harness.physics.bodies import FOOT_HEIGHT, convex_pieces, prism_vertices, recipe
 from harness.physics.gripper import PALM_MASS, PALM_THICKNESS, PLATE_MASS
-from harness.physics.trial import (TABLE_GAP, BatchRunner, Trial, TrialMachine, TrialResult, prechecked,
+from harness.physics.trial import (TABLE_GAP, BatchRunner, Trial, TrialMachine, TrialResult, motion, prechecked,
                                    skipped_travel, yaw)
 from harness.protocol import Protocol
 
@@ -99,15 +99,21 @@ class MujocoRunner(BatchRunner):
                 camera.footprint(trial)
             return early
         slot = _Slot(self, trial, camera)
-        m, d = slot.model, slot.data
+        m, d, step = slot.model, slot.data, mujoco.mj_step
+        # Closing: every step is checked, and the gripper's target holds still.
+        while slot.result is None and slot.phase == "close":
+            step(m, d)
+            slot.fresh = False
+            slot.after_step()
         while slot.result is None:
             quiet = slot.undecided_steps()
             if quiet:
                 slot.advance(quiet)
             slot.before_step()
-            mujoco.mj_step(m, d)
+            step(m, d)
             slot.fresh = False
             slot.after_step()
+        slot.layout.give(d)
         return slot.result
 
 
@@ -126,29 +132,21 @@ class _Slot(TrialMachine):
         centre = 0.5 * (g1 + g2)
         heading = math.atan2(t.axis[1], t.axis[0]) - math.atan2(g.closing_axis[1], g.closing_axis[0])
         base_z = g.depth + TABLE_GAP
-        self.model = compiled(object_xml(t.polygon, t.thickness, t.density, p.table_hull),
-                              gripper_xml(g, t.friction), options_xml(p), p.table_friction)
-        m = self.model
-        self.data = d = mujoco.MjData(m)
+        self.layout = layout = _layout(compiled(object_xml(t.polygon, t.thickness, t.density, p.table_hull),
+                                                gripper_xml(g, t.friction), options_xml(p), p.table_friction))
+        self.model = m = layout.model
+        self.data = d = layout.take()
         self.mocap_pos, self.mocap_quat = d.mocap_pos[0], d.mocap_quat[0]
         self.fresh = False
-        body = m.body
-        self.obj = body("object").id
-        jnt = m.joint
-        self.obj_qpos = m.jnt_qposadr[jnt("object").id]
-        self.obj_dof = m.jnt_dofadr[jnt("object").id]
+        self.obj, self.obj_qpos, self.obj_dof = layout.obj, layout.obj_qpos, layout.obj_dof
         # Views of the object's free joint: position and velocity (linear, angular).
         self.obj_position = d.qpos[self.obj_qpos:self.obj_qpos + 3]
         self.obj_velocity = d.qvel[self.obj_dof:self.obj_dof + 6]
-        self.palm_qpos = m.jnt_qposadr[jnt("palm").id]
-        self.finger_qpos = [m.jnt_qposadr[jnt(f"jaw_{k + 1}").id] for k in range(2)]
-        self.finger_dof = [m.jnt_dofadr[jnt(f"jaw_{k + 1}").id] for k in range(2)]
-        self.limits = tuple(float(m.jnt_range[jnt(f"jaw_{k + 1}").id][1]) for k in range(2))
-        self.jaw_geoms = [m.geom(f"plate_{k + 1}").id for k in range(2)]
-        self.pieces = [k for k in range(m.ngeom) if m.geom_bodyid[k] == self.obj and m.geom(k).name != "foot"]
-        self.touching = [k for k in range(m.ngeom) if m.geom_bodyid[k] == self.obj
-                         and (m.geom(k).name == "foot" or not p.table_hull)]
-        self.table = m.geom("table").id
+        self.palm_qpos, self.finger_qpos, self.finger_dof = layout.palm_qpos, layout.finger_qpos, layout.finger_dof
+        self.limits, self.jaw_geoms, self.table = layout.limits, layout.jaw_geoms, layout.table
+        self.pieces, self.touching = layout.pieces, layout.touching
+        # Per jaw, the piece last found near it, asked first (the count does not depend on the order).
+        self.near_piece = [0, 0]
         width = math.dist(t.g1, t.g2) - 2 * skipped_travel(t, p)
         position, turn = (float(centre[0]), float(centre[1]), base_z), _turn(heading)
         d.qpos[self.palm_qpos:self.palm_qpos + 7] = (*position, *turn)
@@ -199,33 +197,43 @@ class _Slot(TrialMachine):
         """The gripper target's positions (n, 3) and turns (n, 4, quaternions) at each
         step of the lift and of the shake: the protocol's motion (trial.motion) about
         this trial's grasp centre and heading, as TrialMachine.before_step moves it."""
-        m, (cx, cy), h, z = self.motion, self.centre, self.heading, self.base_z
-        rise = np.asarray(m.rise)
-        lift = (np.column_stack([np.full_like(rise, cx), np.full_like(rise, cy), z + rise]),
-                np.tile(_turn(h), (len(rise), 1)))
-        a, b, turn = np.asarray(m.shake).T
+        (cx, cy), h, z = self.centre, self.heading, self.base_z
+        rise, (a, b, turn) = _motion_arrays(self.protocol)
+        lift = np.empty((len(rise), 3))
+        lift[:, 0], lift[:, 1], lift[:, 2] = cx, cy, z + rise
         ch, sh = self.heading_cos_sin
         angle = 0.5 * (h + turn)
-        shake = (np.column_stack([cx + a * ch - b * sh, cy + a * sh + b * ch,
-                                  np.full_like(a, z + self.protocol.lift_height)]),
-                 np.column_stack([np.cos(angle), np.zeros_like(a), np.zeros_like(a), np.sin(angle)]))
-        return {"lift": lift, "shake": shake}
+        shake, turns = np.empty((len(a), 3)), np.zeros((len(a), 4))
+        shake[:, 0], shake[:, 1] = cx + a * ch - b * sh, cy + a * sh + b * ch
+        shake[:, 2] = z + self.protocol.lift_height
+        turns[:, 0], turns[:, 3] = np.cos(angle), np.sin(angle)
+        return {"lift": (lift, np.tile(_turn(h), (len(rise), 1))), "shake": (shake, turns)}
 
     def jaw_states(self):
-        q, v = self.data.qpos.tolist(), self.data.qvel.tolist()
-        return tuple((q[a], v[u]) for a, u in zip(self.finger_qpos, self.finger_dof))
+        q, v = self.data.qpos, self.data.qvel
+        (a0, a1), (u0, u1) = self.finger_qpos, self.finger_dof
+        return (float(q[a0]), float(v[u0])), (float(q[a1]), float(v[u1]))
 
     def jaws_shut(self, states) -> bool:
         """A soft limit may be passed by a little: at or beyond it within 0.1 mm."""
         return all(q > limit - 1e-4 for (q, _), limit in zip(states, self.limits))
 
     def near_jaws(self, distance: float) -> int:
+        """Each jaw is near when any of the object's pieces is within ``distance`` of it;
+        the piece found last time is asked first (most checks then ask one piece a jaw)."""
         self._kinematics()
-        m, d = self.model, self.data
+        m, d, pieces, distance_to = self.model, self.data, self.pieces, mujoco.mj_geomDistance
         near = 0
-        for jaw in self.jaw_geoms:
-            near += any(mujoco.mj_geomDistance(m, d, piece, jaw, distance, None) < distance
-                        for piece in self.pieces)
+        for k, jaw in enumerate(self.jaw_geoms):
+            first = self.near_piece[k]
+            if distance_to(m, d, pieces[first], jaw, distance, None) < distance:
+                near += 1
+                continue
+            for j, piece in enumerate(pieces):
+                if j != first and distance_to(m, d, piece, jaw, distance, None) < distance:
+                    self.near_piece[k] = j
+                    near += 1
+                    break
         return near
 
     def on_table(self) -> bool:
@@ -238,10 +246,11 @@ class _Slot(TrialMachine):
         """With MuJoCo's automatic reset off (options_xml), a diverged state stays NaN."""
         p = self.protocol
         vx, vy, vz, wx, wy, wz = self.obj_velocity.tolist()
-        x, y, z = self.obj_position.tolist()
-        if not all(map(math.isfinite, (x, y, z, vx, vy, vz, wx, wy, wz))):
+        # A speed that is NaN or infinite fails these comparisons too.
+        if not (math.hypot(vx, vy, vz) <= p.max_speed and math.hypot(wx, wy, wz) <= p.max_spin):
             return True
-        return math.hypot(vx, vy, vz) > p.max_speed or math.hypot(wx, wy, wz) > p.max_spin
+        x, y, z = self.obj_position.tolist()
+        return not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z))
 
     def object_height_and_yaw(self) -> tuple[float, float]:
         self._kinematics()
@@ -261,6 +270,57 @@ class _Slot(TrialMachine):
         if self.camera is not None:
             self._kinematics()
             self.camera.snapshot(name, self)
+
+
+@lru_cache(maxsize=8)
+def _motion_arrays(p: Protocol) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """The protocol's motion (trial.motion) as arrays: the lift's rise and the shake's
+    offsets along and across the closing axis and its turn."""
+    m = motion(p)
+    return np.asarray(m.rise), tuple(np.asarray(m.shake).T)
+
+
+class _Layout:
+    """A compiled model's indices (bodies, joints, geoms) and one spare MjData, kept with
+    the model for the process's life: a trial takes the spare, reset to the model's
+    initial state as a new MjData is (mj_resetData; MjData's constructor calls it), and
+    gives it back when it ends; a trial that finds no spare (another holds it) gets new
+    data."""
+
+    def __init__(self, m: mujoco.MjModel):
+        self.model = m
+        body, jnt = m.body, m.joint
+        self.obj = body("object").id
+        self.obj_qpos = int(m.jnt_qposadr[jnt("object").id])
+        self.obj_dof = int(m.jnt_dofadr[jnt("object").id])
+        self.palm_qpos = int(m.jnt_qposadr[jnt("palm").id])
+        self.finger_qpos = [int(m.jnt_qposadr[jnt(f"jaw_{k + 1}").id]) for k in range(2)]
+        self.finger_dof = [int(m.jnt_dofadr[jnt(f"jaw_{k + 1}").id]) for k in range(2)]
+        self.limits = tuple(float(m.jnt_range[jnt(f"jaw_{k + 1}").id][1]) for k in range(2))
+        self.jaw_geoms = [m.geom(f"plate_{k + 1}").id for k in range(2)]
+        mine = [k for k in range(m.ngeom) if m.geom_bodyid[k] == self.obj]
+        foot = [k for k in mine if m.geom(k).name == "foot"]
+        self.pieces = [k for k in mine if k not in foot]
+        # The geoms that may touch the table: the foot where the model has one (the
+        # protocol's table_hull), else every piece.
+        self.touching = foot or mine
+        self.table = m.geom("table").id
+        self.spare: mujoco.MjData | None = None
+
+    def take(self) -> mujoco.MjData:
+        d, self.spare = self.spare, None
+        if d is None:
+            return mujoco.MjData(self.model)
+        mujoco.mj_resetData(self.model, d)
+        return d
+
+    def give(self, d: mujoco.MjData) -> None:
+        self.spare = d
+
+
+@lru_cache(maxsize=MODEL_CACHE)
+def _layout(m: mujoco.MjModel) -> _Layout:
+    return _Layout(m)
 
 
 def check_gripper(g) -> None:
@@ -305,6 +365,7 @@ def _turn(heading: float) -> tuple[float, float, float, float]:
     return (math.cos(0.5 * heading), 0.0, 0.0, math.sin(0.5 * heading))
 
 
+@lru_cache(maxsize=64)
 def gripper_xml(g, friction: float) -> str:
     """The palm (welded to the mocap body ``target``), the two plates on prismatic
     joints and their motors, from the built-in gripper's adapter (harness.physics.gripper),
@@ -364,7 +425,8 @@ def compiled(obj: tuple[str, str], gripper: str, options: str, table_friction: f
     """The trial's model from its parts' MJCF, compiled once per process for each shape,
     gripper and protocol (a compile takes 4-10 ms; an experiment executes each posterior
     sample once per planner and the true shape in every truth trial). Never changed
-    after compiling: every trial gets fresh data (MjData) of its own."""
+    after compiling: every trial gets data (MjData) in the model's initial state
+    (:class:`_Layout`)."""
     assets, body = obj
     xml = (f'<mujoco model="gpis-harness trial"><compiler angle="radian" inertiafromgeom="false"/>'
            f'{options}<asset>{assets}</asset><worldbody>'
