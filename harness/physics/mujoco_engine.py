@@ -176,7 +176,7 @@ class _Slot(TrialMachine):
         path = self.paths.get(self.phase)
         if path is not None:
             self.mocap_pos[:] = path[0][self.tick]
-            self.mocap_quat[:] = path[1][self.tick]
+            self.mocap_quat[:] = path[1] if path[1].ndim == 1 else path[1][self.tick]
 
     def advance(self, steps: int) -> None:
         """Run ``steps`` steps that decide nothing: along the path, or in one call to
@@ -185,6 +185,12 @@ class _Slot(TrialMachine):
         path = self.paths.get(self.phase)
         if path is None:
             mujoco.mj_step(m, d, steps)
+        elif path[1].ndim == 1:  # the gripper does not turn in this phase
+            positions, position, step = path[0], self.mocap_pos, mujoco.mj_step
+            self.mocap_quat[:] = path[1]
+            for k in range(self.tick, self.tick + steps):
+                position[:] = positions[k]
+                step(m, d)
         else:
             positions, turns = path
             position, turn, step = self.mocap_pos, self.mocap_quat, mujoco.mj_step
@@ -196,9 +202,10 @@ class _Slot(TrialMachine):
         self.ticked(steps)
 
     def _paths(self) -> dict:
-        """The gripper target's positions (n, 3) and turns (n, 4, quaternions) at each
-        step of the lift and of the shake: the protocol's motion (trial.motion) about
-        this trial's grasp centre and heading, as TrialMachine.before_step moves it."""
+        """The gripper target's positions (n, 3) and turns (n, 4, quaternions; one (4,)
+        for the whole lift, which does not turn) at each step of the lift and of the
+        shake: the protocol's motion (trial.motion) about this trial's grasp centre and
+        heading, as TrialMachine.before_step moves it."""
         (cx, cy), h, z = self.centre, self.heading, self.base_z
         rise, (a, b, turn) = _motion_arrays(self.protocol)
         lift = np.empty((len(rise), 3))
@@ -209,7 +216,7 @@ class _Slot(TrialMachine):
         shake[:, 0], shake[:, 1] = cx + a * ch - b * sh, cy + a * sh + b * ch
         shake[:, 2] = z + self.protocol.lift_height
         turns[:, 0], turns[:, 3] = np.cos(angle), np.sin(angle)
-        return {"lift": (lift, np.tile(_turn(h), (len(rise), 1))), "shake": (shake, turns)}
+        return {"lift": (lift, np.array(_turn(h))), "shake": (shake, turns)}
 
     def jaw_states(self):
         q, v = self.data.qpos, self.data.qvel
@@ -218,7 +225,8 @@ class _Slot(TrialMachine):
 
     def jaws_shut(self, states) -> bool:
         """A soft limit may be passed by a little: at or beyond it within 0.1 mm."""
-        return all(q > limit - 1e-4 for (q, _), limit in zip(states, self.limits))
+        ((q0, _), (q1, _)), (limit0, limit1) = states, self.limits
+        return q0 > limit0 - 1e-4 and q1 > limit1 - 1e-4
 
     def near_jaws(self, distance: float) -> int:
         """Each jaw is near when any of the object's pieces is within ``distance`` of it;

@@ -89,8 +89,10 @@ def pad_footprints(trial: Trial) -> list[Polygon]:
 
 
 def approach_blocked(trial: Trial) -> bool:
-    """Whether a jaw pad would come down on the object (overlap of positive area)."""
-    return any(shapely.intersection(pad, trial.polygon).area > 0.0 for pad in pad_footprints(trial))
+    """Whether a jaw pad would come down on the object (overlap of positive area). A pad
+    that does not meet the object at all (most pads) is told by the cheap predicate."""
+    return any(shapely.intersects(pad, trial.polygon) and shapely.intersection(pad, trial.polygon).area > 0.0
+               for pad in pad_footprints(trial))
 
 
 def free_travel(trial: Trial) -> float:
@@ -292,6 +294,7 @@ class TrialMachine:
         self.heading_cos_sin = (math.cos(heading), math.sin(heading))
         self.start_z, self.start_yaw = self.object_height_and_yaw()
         self.stall_steps = p.steps(p.stall_time)
+        self.slow_speed = p.stall_fraction * g.closing_speed  # a jaw slower than this is stalling
         self.close_steps = p.steps(0.5 * width / g.closing_speed + p.closing_slack)
         self.check_steps = p.steps(p.check_interval)
         self.lost_checks = max(1, int(math.ceil(p.lost_time / (self.check_steps * p.time_step))))
@@ -342,7 +345,7 @@ class TrialMachine:
         g, p = self.trial.gripper, self.protocol
         states = self.jaw_states()
         (q0, v0), (q1, v1) = states
-        slow_speed = p.stall_fraction * g.closing_speed
+        slow_speed = self.slow_speed
         slow = abs(v0) < slow_speed and abs(v1) < slow_speed
         shut = self.jaws_shut(states)
         self.quiet = self.quiet + 1 if slow else 0
