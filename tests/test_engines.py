@@ -259,10 +259,11 @@ def test_the_base_follows_the_protocols_path_in_mujoco():
     grasp (the lift up to the lift height, the shake's offsets and turns), as
     TrialMachine.before_step moves Bullet's base."""
     slot = _closed_slot(_rectangle_trials((-0.045, 0.01), (0.045, -0.01))[0])
-    positions, turn = slot.paths["lift"]
+    positions, turns = slot.paths["lift"]
     assert positions[-1][2] == pytest.approx(slot.base_z + MUJOCO.lift_height, abs=1e-12)
     assert positions[:, :2] == pytest.approx(np.tile(slot.centre, (len(positions), 1)))
-    assert turn.shape == (4,) and 2 * np.arctan2(turn[3], turn[0]) == pytest.approx(slot.heading)  # no turn
+    heading = 2 * np.arctan2(turns[:, 3], turns[:, 0])
+    assert heading == pytest.approx(np.full(len(turns), slot.heading))
     shake, shake_turns = slot.paths["shake"]
     angle = 2 * np.arctan2(shake_turns[:, 3], shake_turns[:, 0]) - slot.heading
     a, b, turn = np.asarray(slot.motion.shake).T

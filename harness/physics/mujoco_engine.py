@@ -176,7 +176,7 @@ class _Slot(TrialMachine):
         path = self.paths.get(self.phase)
         if path is not None:
             self.mocap_pos[:] = path[0][self.tick]
-            self.mocap_quat[:] = path[1] if path[1].ndim == 1 else path[1][self.tick]
+            self.mocap_quat[:] = path[1][self.tick]
 
     def advance(self, steps: int) -> None:
         """Run ``steps`` steps that decide nothing: along the path, or in one call to
@@ -185,12 +185,6 @@ class _Slot(TrialMachine):
         path = self.paths.get(self.phase)
         if path is None:
             mujoco.mj_step(m, d, steps)
-        elif path[1].ndim == 1:  # the gripper does not turn in this phase
-            positions, position, step = path[0], self.mocap_pos, mujoco.mj_step
-            self.mocap_quat[:] = path[1]
-            for k in range(self.tick, self.tick + steps):
-                position[:] = positions[k]
-                step(m, d)
         else:
             positions, turns = path
             position, turn, step = self.mocap_pos, self.mocap_quat, mujoco.mj_step
@@ -202,10 +196,10 @@ class _Slot(TrialMachine):
         self.ticked(steps)
 
     def _paths(self) -> dict:
-        """The gripper target's positions (n, 3) and turns (n, 4, quaternions; one (4,)
-        for the whole lift, which does not turn) at each step of the lift and of the
-        shake: the protocol's motion (trial.motion) about this trial's grasp centre and
-        heading, as TrialMachine.before_step moves it."""
+        """The gripper target's positions (n, 3) and turns (n, 4, quaternions; the lift's
+        one turn broadcast) at each step of the lift and of the shake: the protocol's
+        motion (trial.motion) about this trial's grasp centre and heading, as
+        TrialMachine.before_step moves it."""
         (cx, cy), h, z = self.centre, self.heading, self.base_z
         rise, (a, b, turn) = _motion_arrays(self.protocol)
         lift = np.empty((len(rise), 3))
@@ -216,7 +210,7 @@ class _Slot(TrialMachine):
         shake[:, 0], shake[:, 1] = cx + a * ch - b * sh, cy + a * sh + b * ch
         shake[:, 2] = z + self.protocol.lift_height
         turns[:, 0], turns[:, 3] = np.cos(angle), np.sin(angle)
-        return {"lift": (lift, np.array(_turn(h))), "shake": (shake, turns)}
+        return {"lift": (lift, np.broadcast_to(np.array(_turn(h)), (len(rise), 4))), "shake": (shake, turns)}
 
     def jaw_states(self):
         q, v = self.data.qpos, self.data.qvel
