@@ -232,3 +232,69 @@ def test_the_interleaved_timing_runs_every_trial_in_both_engines_as_a_plain_run_
             plain = runner.run(trials)
         assert [repr(r.as_dict()) for r in got] == [repr(r.as_dict()) for r in plain]
     assert {r.outcome for r in results[1]} - {"approach_collision", "empty_shape"}  # some were simulated
+
+
+def _light_bar_trials(density: float, n: int = 2) -> list[Trial]:
+    """A bar 8 cm long, 6 mm wide and 2.4 cm thick (11.5 cm^3), gripped across its middle
+    by the library's gripper (20 N, 50 g plates), with millimetre approach offsets."""
+    from shapely.geometry import box
+
+    gripper = _rectangle_trial((-0.045, 0.0), (0.045, 0.0)).gripper
+    bar = box(-0.04, -0.003, 0.04, 0.003)
+    offsets = np.random.default_rng(11).normal(0.0, 0.001, (n, 2, 2))
+    trials = []
+    for k in range(n):
+        g1, g2 = np.array([0.0, -0.03]) + offsets[k, 0], np.array([0.0, 0.03]) + offsets[k, 1]
+        axis = (g2 - g1) / math.hypot(*(g2 - g1))
+        trials.append(Trial(bar, tuple(g1), tuple(g2), tuple(axis), 0.024, density, 0.5, gripper))
+    return trials
+
+
+def test_a_light_object_is_classed_by_its_mass_against_a_jaws_mass_read_from_the_urdf():
+    """The built-in gripper's URDF gives each plate PLATE_MASS; a bar of 11.52 cm^3 is light
+    below 0.3 x 50 g = 15 g, so at 1300 kg/m^3 (14.98 g) and not at 1303 (15.01 g)."""
+    from harness.physics import bullet
+    from harness.physics.gripper import PLATE_MASS
+
+    with make_runner(Protocol()) as runner:
+        assert runner.jaw_mass(_light_bar_trials(1000.0, 1)[0].gripper) == pytest.approx(PLATE_MASS, rel=1e-9)
+        limit = bullet.LIGHT_FRACTION * PLATE_MASS / 11.52e-6
+        assert runner.is_light(_light_bar_trials(limit * 0.999, 1)[0])
+        assert not runner.is_light(_light_bar_trials(limit * 1.001, 1)[0])
+
+
+def test_a_light_thin_bar_is_held_at_the_finer_step_bullets_solver_needs(monkeypatch):
+    """The 3.5 g thin bar (300 kg/m^3, 0.07 of a plate's mass): at the design's step
+    Bullet's plates press into it and close past it (`no_contact`, the control: the rule
+    switched off); the runner runs it LIGHT_REFINE times finer, where it is held, as
+    MuJoCo holds it at its own step (docs/physics.md, "Light objects")."""
+    from harness.physics import bullet
+
+    trials = _light_bar_trials(300.0)
+    with make_runner(Protocol()) as runner:
+        assert [r.outcome for r in runner.run(trials)] == ["success"] * 2
+    with make_runner(Protocol.of("mujoco")) as runner:
+        assert [r.outcome for r in runner.run(trials)] == ["success"] * 2
+    monkeypatch.setattr(bullet, "LIGHT_FRACTION", 0.0)
+    with make_runner(Protocol()) as runner:
+        assert [r.outcome for r in runner.run(trials)] == ["no_contact"] * 2
+
+
+def test_a_batchs_light_objects_run_apart_without_changing_the_others():
+    """A light bar between two trials of the rectangle: the rectangle's trials give, bit for
+    bit, their rows of a batch whose middle trial is not simulated (an empty sample: the
+    same world, the same slots), and the light bar its own run's outcome."""
+    from dataclasses import replace
+
+    from shapely.geometry import Polygon
+
+    rect = [_rectangle_trial((-0.045, 0.0), (0.045, 0.0)), _rectangle_trial((-0.045, 0.004), (0.045, 0.004))]
+    light = _light_bar_trials(300.0, 1)[0]
+    with make_runner(Protocol()) as runner:
+        mixed = runner.run([rect[0], light, rect[1]])
+        without = runner.run([rect[0], replace(light, polygon=Polygon()), rect[1]])
+        light_alone = runner.run([light])
+    assert without[1].outcome == "empty_shape"
+    assert repr(mixed[0].as_dict()) == repr(without[0].as_dict())
+    assert repr(mixed[2].as_dict()) == repr(without[2].as_dict())
+    assert mixed[1].outcome == light_alone[0].outcome == "success"

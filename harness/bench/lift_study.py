@@ -650,7 +650,7 @@ def manifold_levers(grasps_per_scene: int = 6, seed: int = 0) -> dict:
             if trial.polygon.is_empty or approach_blocked(trial):
                 continue
             runner._reset_world()
-            slot = _Slot(runner, 0, trial, (0.0, 0.0), None)
+            slot = _Slot(runner, 0, trial, (0.0, 0.0), runner.protocol, None)
             while slot.phase == "close" and slot.result is None:
                 slot.before_step()
                 pb.stepSimulation(physicsClientId=runner.client)
