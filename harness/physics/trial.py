@@ -59,8 +59,8 @@ class Trial:
 @dataclass(frozen=True)
 class TrialResult:
     """A trial's outcome and what the simulation measured: steps simulated (of the
-    trial's own step: Bullet runs light objects at a finer one, harness.physics.bullet), the jaw
-    separation when the jaws stalled, the object's turn about the vertical while the
+    trial's own step: Bullet runs light objects at a finer one, harness.physics.bullet),
+    the jaw separation when the jaws stalled, the object's turn about the vertical while the
     jaws closed (radians; the flat plates aligning it), its final rise (m, of the centre
     of mass), and how far it turned in the gripper after the jaws stalled (radians; a
     heavy object held far from its centre of mass pivots about the grasp axis)."""
