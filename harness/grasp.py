@@ -3,6 +3,7 @@ batched), planar force closure, Ferrari-Canny quality and per-shape centres of m
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from functools import cached_property
@@ -182,12 +183,16 @@ class Regions:
     (F, V, 2): vertices of the convex hull of the centres of the region's cells (its
     extreme cells in V = HULL_DIRECTIONS directions), so that the region's extent in any
     direction is a maximum over V points (to within half a cell); fragmented (F,): the
-    field has inside nodes outside its body (pieces the physics does not extrude)."""
+    field has inside nodes outside its body (pieces the physics does not extrude);
+    spread (F,): the mean distance (m) of the region's area from its centre of mass (NaN
+    without an inside): the lever of the table's friction on the region under an even
+    pressure (harness.push)."""
 
     area: np.ndarray
     center_of_mass: np.ndarray
     hull: np.ndarray
     fragmented: np.ndarray
+    spread: np.ndarray
 
     def extent(self, field_index: np.ndarray, origin: np.ndarray, direction: np.ndarray) -> np.ndarray:
         """How far (B,) region ``field_index[b]`` reaches from ``origin[b]`` along the unit
@@ -617,6 +622,24 @@ def ferrari_canny(c1, c2, n1, n2, friction, com, torque_scale: float) -> np.ndar
     return np.where(np.isfinite(radius) & (radius > 0), radius, 0.0)
 
 
+def replace_rows(record, rows, part):
+    """A copy of a dataclass of per-row arrays (Contacts, a Squeeze, ...) with ``rows``
+    taken from ``part``."""
+    out = {}
+    for f in dataclasses.fields(record):
+        column = getattr(record, f.name).copy()
+        column[rows] = getattr(part, f.name)
+        out[f.name] = column
+    return type(record)(**out)
+
+
+def turn_about(points, centre, angle) -> np.ndarray:
+    """Points (B, 2) turned by ``angle`` (B,) rad about ``centre`` (B, 2)."""
+    c, s = np.cos(angle), np.sin(angle)
+    v = points - centre
+    return centre + np.column_stack([c * v[:, 0] - s * v[:, 1], s * v[:, 0] + c * v[:, 1]])
+
+
 def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Row-wise 3-D cross product (faster than np.cross on short rows)."""
     return np.column_stack([u[:, 1] * v[:, 2] - u[:, 2] * v[:, 1],
@@ -636,8 +659,12 @@ def _largest_regions(values: np.ndarray, grid: Grid) -> Regions:
         com[:, 1] = w.sum(axis=2) @ grid.coords / total
     com[total == 0] = np.nan
     if not mine.any():
-        return Regions(np.zeros(f), com, np.full((f, 1, 2), -np.inf), fragmented)
-    return Regions(total * h * h, com, _hulls(mine, grid), fragmented)
+        return Regions(np.zeros(f), com, np.full((f, 1, 2), -np.inf), fragmented, np.full(f, np.nan))
+    x = grid.coords[None, None, :] - com[:, 0, None, None]
+    y = grid.coords[None, :, None] - com[:, 1, None, None]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        spread = (w * np.sqrt(x * x + y * y)).sum(axis=(1, 2)) / total
+    return Regions(total * h * h, com, _hulls(mine, grid), fragmented, spread)
 
 
 def _bodies(values: np.ndarray, cell: float, frac: np.ndarray | None = None):
@@ -683,7 +710,7 @@ def body_fields(fields: SDFBatch, ids: np.ndarray) -> SDFBatch:
     values[other] = np.maximum(values[other], h)
     gx[other], gy[other], twist[other] = 0.0, 0.0, 0.0
     r = fields.regions
-    regions = Regions(r.area[ids], r.center_of_mass[ids], r.hull[ids], np.zeros(len(ids), dtype=bool))
+    regions = Regions(r.area[ids], r.center_of_mass[ids], r.hull[ids], np.zeros(len(ids), dtype=bool), r.spread[ids])
     return SDFBatch.of_parts(fields.grid, values, gx, gy, twist, regions)
 
 

@@ -4,7 +4,6 @@ plates' pressure, their Wilson intervals, and failure counts by reason."""
 
 from __future__ import annotations
 
-import dataclasses
 import time
 from dataclasses import dataclass
 from functools import cached_property
@@ -13,10 +12,10 @@ import numpy as np
 
 from harness.belief import Belief
 from harness.grasp import (DEGENERATE, HULL_DIRECTIONS, MISSED, OK, TOO_WIDE, Contacts, Grasp, Regions, SDFBatch,
-                           body_fields, find_contacts, plate_closure)
+                           body_fields, find_contacts, plate_closure, replace_rows)
 from harness.lift import LIFT_REASONS, judge, side_normal
 from harness.settings import GraspSettings
-from harness.squeeze import squeeze
+from harness.push import push_and_squeeze
 
 #: Failure reasons, in the order a draw is classified (the first that applies): the
 #: planar ones (P_F), then the lift's for draws in force closure (P_L).
@@ -126,6 +125,7 @@ class DrawPool:
         self._com = np.full((n, 2), np.nan)
         self._hull = np.full((n, HULL_DIRECTIONS, 2), -np.inf)
         self._fragmented = np.zeros(n, dtype=bool)
+        self._spread = np.full(n, np.nan)
         self._draws: EvaluationDraws | None = None
 
     def __len__(self) -> int:
@@ -144,11 +144,12 @@ class DrawPool:
             self._fields[:, s] = part.values, part.gx, part.gy, part.twist
             regions = part.regions
             self._area[s], self._com[s], self._hull[s] = regions.area, regions.center_of_mass, regions.hull
-            self._fragmented[s] = regions.fragmented
+            self._fragmented[s], self._spread[s] = regions.fragmented, regions.spread
             self.drawn += k
             d = self.drawn
             shapes = SDFBatch.of_parts(grid, *self._fields[:, :d], Regions(self._area[:d], self._com[:d],
-                                                                            self._hull[:d], self._fragmented[:d]))
+                                                                            self._hull[:d], self._fragmented[:d],
+                                                                            self._spread[:d]))
             self._draws = EvaluationDraws(shapes, self.approach[:d], self.friction[:d], self.pressure[:d],
                                           self.belief.characteristic_length)
         self.seconds += time.perf_counter() - start
@@ -188,14 +189,17 @@ class QualityEstimate:
 class DrawOutcomes:
     """Per-draw results (G, n) for G grasps: force closure (the paper's, at the first
     contacts), lifted (force closure at once or after the plates' squeeze, or held in
-    the plane by it, and the lift; None when the lift was not judged), failure reason index into FAILURE_REASONS
-    (-1 for lifted, or for force closure without the lift), whether the weight turned
-    the object, the Ferrari-Canny quality, the lift's chance averaged over the levers (0
-    out of force closure; None when the lift was not judged), and whether the squeeze
-    settled the draw (into force closure, or held in the plane: harness.squeeze; never
-    when the lift was not judged). ``lift_inputs``, when asked for (:func:`evaluate_draws`), holds the lift
-    model's inputs and intermediates per draw (:data:`LIFT_INPUTS`; NaN where the plates
-    were not in force closure, so the lift was not judged)."""
+    the plane by it, and the lift; None when the lift was not judged), failure reason
+    index into FAILURE_REASONS (-1 for lifted, or for force closure without the lift),
+    whether the weight turned the object, the Ferrari-Canny quality, the lift's chance
+    averaged over the levers (0 out of force closure; None when the lift was not
+    judged), whether the squeeze settled the draw (into force closure, or held in the
+    plane: harness.squeeze; never when the lift was not judged), and whether the push
+    before the second plate arrived moved the closing line across the object
+    (harness.push: the lift then judges another grasp than P_F's; None when the lift
+    was not judged). ``lift_inputs``, when asked for (:func:`evaluate_draws`), holds the
+    lift model's inputs and intermediates per draw (:data:`LIFT_INPUTS`; NaN where the
+    plates were not in force closure, so the lift was not judged)."""
 
     closure: np.ndarray
     lifted: np.ndarray | None
@@ -205,6 +209,7 @@ class DrawOutcomes:
     lift_chance: np.ndarray | None = None
     squeezed: np.ndarray | None = None
     lift_inputs: dict | None = None
+    pushed: np.ndarray | None = None
 
     @cached_property
     def estimates(self) -> list[QualityEstimate]:
@@ -248,7 +253,8 @@ def evaluate_draws(grasps, draws: EvaluationDraws, settings: GraspSettings, lift
     normal is undefined (degenerate_normal), when the plates' contact patches are not in
     force closure (friction_cone; harness.grasp.plate_closure) and, with the lift, the
     plates' squeeze does not bring them into it nor hold the object in the plane either
-    (harness.squeeze), and then, in force closure or so held, when the weight slides the
+    (harness.squeeze; the lift's contacts are those after the push of the plate that
+    arrives first, harness.push), and then, in force closure or so held, when the weight slides the
     object out (weight_slip) or turns it back onto the table (weight_torque) (harness.lift,
     with the shape sample's area and centre of mass and draw i's pressure deviates, at the
     contacts where the squeeze stopped).
@@ -295,13 +301,14 @@ def _judge(g1, g2, field, draws: EvaluationDraws, settings: GraspSettings, lift:
     lifted = np.zeros(b, dtype=bool)
     pivots = np.zeros(b, dtype=bool)
     squeezed = np.zeros(b, dtype=bool)
+    pushed = np.zeros(b, dtype=bool)
     chance = np.zeros(b)
     judged, in_closure = contacts, closure
     if lift:
         # The lift is judged on the body the physics extrudes (the largest region): on a
         # draw with other pieces, the jaws pass where those pieces would be.
-        judged, in_closure, settled = _on_bodies(g1, g2, field, draws, contacts, closure, gamma, settings)
-        squeezed = settled.squeezed
+        judged, in_closure, settled, push = _on_bodies(g1, g2, field, draws, contacts, closure, gamma, settings)
+        squeezed, pushed = settled.squeezed, push.moved
         held = in_closure | squeezed
     ok = judged.status == OK
     reason = np.full(b, -1, dtype=np.int8)
@@ -330,7 +337,7 @@ def _judge(g1, g2, field, draws: EvaluationDraws, settings: GraspSettings, lift:
         inputs = {name: v.reshape(shape) for name, v in inputs.items()}
     return DrawOutcomes(closure.reshape(shape), lifted.reshape(shape) if lift else None, reason.reshape(shape),
                         pivots.reshape(shape), quality.reshape(shape), chance.reshape(shape) if lift else None,
-                        squeezed.reshape(shape), inputs)
+                        squeezed.reshape(shape), inputs, pushed.reshape(shape) if lift else None)
 
 
 def _lift_inputs(verdict, reach, friction, settings: GraspSettings) -> dict:
@@ -350,12 +357,13 @@ def _lift_inputs(verdict, reach, friction, settings: GraspSettings) -> dict:
 def _on_bodies(g1, g2, field, draws: EvaluationDraws, contacts: Contacts, closure, gamma, settings: GraspSettings):
     """The contacts, force closure and squeeze of the lift: the first contacts and their
     closure (P_F's), except on draws whose shape has pieces besides its body, where the
-    jaws are marched again on the body alone (harness.grasp.body_fields); then the
-    squeeze on the same fields."""
+    jaws are marched again on the body alone (harness.grasp.body_fields); then the push
+    before the second plate arrives and the squeeze, on the same fields
+    (harness.push.push_and_squeeze)."""
     jaw, scale = settings.jaw_width, draws.torque_scale
     on_split = draws.shapes.regions.fragmented[field]
     if not on_split.any():
-        return contacts, closure, squeeze(draws.shapes, g1, g2, field, contacts, closure, gamma, jaw, scale)
+        return push_and_squeeze(draws.shapes, g1, g2, field, contacts, closure, gamma, jaw, scale)
     closure = closure.copy()
     pieces = []
     fragmented = np.unique(field[on_split])
@@ -366,24 +374,16 @@ def _on_bodies(g1, g2, field, draws: EvaluationDraws, contacts: Contacts, closur
         bodies = body_fields(draws.shapes, ids)
         on_body = find_contacts(bodies, g1[rows], g2[rows], jaw, field_index=local)
         body_closure, _ = plate_closure(on_body, gamma[rows], bodies.center_of_mass[local], scale, with_quality=False)
-        contacts = _replace_rows(contacts, rows, on_body)
+        pieces.append((rows, push_and_squeeze(bodies, g1[rows], g2[rows], local, on_body, body_closure, gamma[rows],
+                                               jaw, scale)))
+    contacts, closure, settled, pushed = push_and_squeeze(draws.shapes, g1, g2, field, contacts, closure, gamma, jaw,
+                                                           scale, rest=~on_split)
+    for rows, (on_body, body_closure, part, push_part) in pieces:
+        contacts = replace_rows(contacts, rows, on_body)
         closure[rows] = body_closure
-        pieces.append((rows, squeeze(bodies, g1[rows], g2[rows], local, on_body, body_closure, gamma[rows], jaw,
-                                     scale)))
-    settled = squeeze(draws.shapes, g1, g2, field, contacts, closure | on_split, gamma, jaw, scale)  # the rest
-    for rows, part in pieces:
-        settled = _replace_rows(settled, rows, part)
-    return contacts, closure, settled
-
-
-def _replace_rows(record, rows, part):
-    """A copy of a dataclass of per-row arrays with ``rows`` taken from ``part``."""
-    out = {}
-    for f in dataclasses.fields(record):
-        column = getattr(record, f.name).copy()
-        column[rows] = getattr(part, f.name)
-        out[f.name] = column
-    return type(record)(**out)
+        settled = replace_rows(settled, rows, part)
+        pushed = replace_rows(pushed, rows, push_part)
+    return contacts, closure, settled, pushed
 
 
 def estimate_p_f(grasps, draws: EvaluationDraws, settings: GraspSettings, lift: bool = True) -> list[QualityEstimate]:

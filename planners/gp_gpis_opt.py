@@ -3,7 +3,10 @@ programming for a smooth surrogate of P_F on the mean shape under approach noise
 shape uncertainty, minus a penalty on shape uncertainty at the contacts, subject to
 antipodal constraints. With ``quality = "lift"`` the surrogate is of P_L instead: each
 sigma point's P_F term times the lift model's smooth probability, with the centre of
-mass's posterior mean and spread (harness.lift.MassBelief).
+mass's posterior mean and spread (harness.lift.MassBelief), and each finalist competes
+in the re-ranking as it is and slid along its closing line so that both plates reach the
+mean shape together (:func:`centred`: the lift model's push, which the surrogate does
+not model).
 
 Decision variables: the two jaw start points (in cells), not the contact points as in the
 paper. With jaw plates a grasp's contacts lie on the plate's edges as often as on its
@@ -130,10 +133,18 @@ class GPGPISOpt(Planner):
             # Infeasible optima (out of the friction cone on the mean) are not executed
             # (status "infeasible"): they compete only when no optimum is feasible.
             finalists = ([i for i in order if feasible[i]] or order)[: self.finalists]
+            entries = jaws[finalists]
+            if self.quality == "lift":
+                # Each finalist competes as it is and slid along its closing line so that
+                # both plates reach the mean shape together (P_L's push, harness.push).
+                entries = np.concatenate([entries, centred(entries, objective, problem.settings.jaw_width)])
+                finalists = finalists + finalists
             draws = draw_evaluation(belief, self.rerank_samples, *rerank_rng.spawn(4))
-            score, tie = ranking_scores(jaws[finalists], draws, problem.settings, self.quality == "lift")
+            score, tie = ranking_scores(entries, draws, problem.settings, self.quality == "lift")
             pick = int(np.lexsort((-tie, -score))[0])  # as gp-p ranks: best score, then Ferrari-Canny
             chosen, estimate = finalists[pick], float(score[pick])
+            jaws = jaws.copy()
+            jaws[chosen] = entries[pick]
             message = f"finalists re-ranked on {self.rerank_samples} draws"
             clock.lap("rerank")
         elif order:
@@ -148,6 +159,23 @@ class GPGPISOpt(Planner):
         g = jaws[chosen]
         return Plan(Grasp(tuple(g[0]), tuple(g[1])), status, estimate, iterations=int(result.iterations.max()),
                     evaluations=result.evaluations, seconds=clock.phases, trace=trace, message=message)
+
+
+def centred(jaws: np.ndarray, objective: "SurrogateObjective", jaw_width: float) -> np.ndarray:
+    """Grasps (R, 2, 2) slid along their closing lines so that both plates reach the mean
+    shape together (the same line, width and contacts on the mean): the jaws close
+    symmetrically, so a plate that arrives first pushes the object until the other does,
+    which the lift model counts (harness.push) and the surrogate does not (its pull
+    towards one clearance per jaw is a weak regulariser, and the SCP can leave a jaw
+    centimetres out). A slid grasp that would leave the grid is left as it was."""
+    g1, g2 = jaws[:, 0], jaws[:, 1]
+    c = find_contacts(objective.mean, g1, g2, jaw_width)
+    u = (g2 - g1) / np.maximum(np.linalg.norm(g2 - g1, axis=1, keepdims=True), 1e-300)
+    gap1 = np.einsum("ij,ij->i", c.c1 - g1, u)
+    gap2 = np.einsum("ij,ij->i", g2 - c.c2, u)
+    shift = np.where(c.status == OK, 0.5 * (gap1 - gap2), 0.0)
+    slid = jaws + shift[:, None, None] * u[:, None, :]
+    return np.where(objective.valid(slid)[:, None, None], slid, jaws)
 
 
 def _trace(result, tol):

@@ -1,8 +1,8 @@
 """The mean-shape baseline: candidates on the GPIS mean, each judged once on the mean
 with no noise, ranked by Ferrari-Canny quality or, with ``quality = "lift"``, by the lift
 model's smooth probability on the mean shape (its weight and centre of mass taken as
-certain; force closure required, at once or after the plates' squeeze). It ignores
-shape uncertainty."""
+certain; force closure required, at once or after the push and the plates' squeeze).
+It ignores shape uncertainty."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import numpy as np
 
 from harness.grasp import find_contacts, plate_closure
 from harness.lift import MassBelief
-from harness.squeeze import squeeze
+from harness.push import push_and_squeeze
 from planners.base import Plan, Planner, Problem, check_quality
 from planners.sampling import search
 
@@ -42,9 +42,11 @@ class MeanShape(Planner):
         closed, quality = plate_closure(c, settings.friction, belief.center_of_mass, belief.characteristic_length)
         if mass is None:
             return quality, np.zeros(len(grasps))
-        # As P_L: a grasp out of force closure may be squeezed into it (harness.squeeze).
-        settled = squeeze(mean, grasps[:, 0], grasps[:, 1], 0, c, closed, settings.friction, settings.jaw_width,
-                          belief.characteristic_length)
+        # As P_L: the nearer plate may push the object before the other arrives
+        # (harness.push), and a grasp out of force closure may be squeezed into it
+        # (harness.squeeze).
+        c, closed, settled, _ = push_and_squeeze(mean, grasps[:, 0], grasps[:, 1], 0, c, closed, settings.friction,
+                                              settings.jaw_width, belief.characteristic_length)
         held = closed | settled.squeezed
         lift = np.zeros(len(grasps))
         lift[held] = mass.margin(settled.c1[held], settled.c2[held], settled.w1[held], settled.w2[held],

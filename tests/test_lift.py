@@ -244,16 +244,22 @@ def test_a_lifted_draw_is_in_force_closure_or_squeezed_into_it_and_the_reasons_p
     # piece): they are the same contacts on a sample in one piece.
     whole = ~draws.shapes.regions.fragmented
     assert whole.sum() >= 300
-    for est, lifted, closure, squeezed in zip(out.estimates, out.lifted, out.closure, out.squeezed):
-        assert not (lifted & ~(closure | squeezed))[whole].any() and not (closure & squeezed)[whole].any()
+    # Draws the push before the second plate moved (harness.push) are judged on another
+    # grasp than P_F's: P_F's closure says nothing of them.
+    for est, lifted, closure, squeezed, pushed in zip(out.estimates, out.lifted, out.closure, out.squeezed,
+                                                      out.pushed):
+        same = whole & ~pushed
+        assert same.sum() >= 50
+        assert not (lifted & ~(closure | squeezed))[same].any() and not (closure & squeezed)[same].any()
         assert est.squeezed == squeezed.sum()
-        assert est.p_l <= est.p_f + (est.squeezed + (~whole).sum()) / 400
+        assert est.p_l <= est.p_f + (est.squeezed + (~same).sum()) / 400
         assert round(est.p_l * 400) + sum(est.failures.values()) == 400
         assert est.p_l_ci_low <= est.p_l <= est.p_l_ci_high
     # A weightless object lifts whenever it is in force closure.
     light = replace(resolve(scene), density=1e-9)
     out = evaluate_draws(grasps, draws, light)
-    np.testing.assert_array_equal(out.lifted[:, whole], (out.closure | out.squeezed)[:, whole])
+    same = whole & ~out.pushed
+    np.testing.assert_array_equal(out.lifted[same], (out.closure | out.squeezed)[same])
 
 
 def test_the_smooth_lift_is_the_average_of_the_draws_verdicts():

@@ -4,6 +4,7 @@ built-in on every library scene, and GP-GPIS-OPT's quality on the rectangle."""
 from __future__ import annotations
 
 import json
+import math
 import os
 import subprocess
 import sys
@@ -14,7 +15,7 @@ import pytest
 
 from harness.belief import build_belief
 from harness.errors import InputError
-from harness.grasp import Grasp
+from harness.grasp import Grasp, find_contacts
 from harness.quality import default_streams, draw_evaluation, estimate_p_f, ranking_scores
 from harness.scene import library_names, load_scene
 from harness.seeding import stream
@@ -77,6 +78,35 @@ def test_gp_gpis_opt_lift_picks_the_optimum_p_l_ranks_first_among_its_finalists(
     assert score[0] == pytest.approx(auto.estimate, abs=1e-12)
     assert score[0] >= score[1]
     assert GPGPISOpt().finalists == 0 and GPGPISOpt(quality="lift").finalists == 10
+
+
+def test_gp_gpis_opt_lift_slides_its_optima_so_both_plates_reach_the_mean_shape_together():
+    """centred: grasps across the stapler's mean shape with one jaw far out are slid along
+    their lines until both plates' gaps to the mean shape are equal (so the nearer one does
+    not push the object before the other arrives, harness.push); the width and the
+    contacts on the mean stay as they were."""
+    from harness.lift import MassBelief
+    from planners.gp_gpis_opt import SurrogateObjective, centred
+
+    scene = load_scene("stapler")
+    belief = build_belief(scene, stream(0, "stapler", 1, "sensor")).prepare()
+    problem = Problem.for_belief(belief)
+    mass = MassBelief.of_posterior(belief, problem.settings, 64, stream(0, "test-centred"))
+    objective = SurrogateObjective(problem, 1.0, math.radians(5.0), mass)
+    jaws = np.array([[[-0.01, -0.065], [-0.01, 0.033]], [[0.03, -0.04], [0.03, 0.058]], [[0.05, -0.06], [0.04, 0.035]]])
+    slid = centred(jaws, objective, problem.settings.jaw_width)
+    before = find_contacts(objective.mean, jaws[:, 0], jaws[:, 1], problem.settings.jaw_width)
+    after = find_contacts(objective.mean, slid[:, 0], slid[:, 1], problem.settings.jaw_width)
+    u = (jaws[:, 1] - jaws[:, 0]) / np.linalg.norm(jaws[:, 1] - jaws[:, 0], axis=1, keepdims=True)
+    gaps = lambda c, j: (np.einsum("ij,ij->i", c.c1 - j[:, 0], u), np.einsum("ij,ij->i", j[:, 1] - c.c2, u))  # noqa: E731
+    g1, g2 = gaps(before, jaws)
+    assert np.all(np.abs(g1 - g2) > 0.01)  # unequal to begin with
+    h1, h2 = gaps(after, slid)
+    np.testing.assert_allclose(h1, h2, atol=1e-9)
+    np.testing.assert_allclose(np.linalg.norm(slid[:, 1] - slid[:, 0], axis=1),
+                               np.linalg.norm(jaws[:, 1] - jaws[:, 0], axis=1), atol=1e-12)
+    np.testing.assert_allclose(after.c1, before.c1, atol=1e-9)
+    np.testing.assert_allclose(after.c2, before.c2, atol=1e-9)
 
 
 class _Outside(Planner):

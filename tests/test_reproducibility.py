@@ -29,7 +29,8 @@ from harness.settings import resolve
 
 ROOT = Path(__file__).resolve().parent.parent
 REFERENCE = ROOT / "results" / "reference"
-#: A plan of the marker (gp-gpis-opt-lift's in the quick experiment, to eight digits).
+#: A grasp of the marker (gp-gpis-opt-lift's plan in the quick experiment before the push
+#: entered P_L, to eight digits).
 GRASP = np.array([[0.04291604, -0.01250224], [0.02351490, 0.03833332]])
 
 
