@@ -45,7 +45,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from harness.grasp import OK, PATCH_DEPTH, Contacts, SDFBatch, find_contacts, plate_closure, replace_rows, turn_about
-from harness.squeeze import Squeeze, squeeze
+from harness.squeeze import SQUEEZE_LIMIT, Squeeze, squeeze
 
 #: The push is followed in steps of at most this length (m) of the plate's travel, about
 #: a grid cell, as the slide is (harness.squeeze.SLIDE_STEP).
@@ -202,8 +202,9 @@ def push_and_squeeze(fields: SDFBatch, g1, g2, field, contacts: Contacts, closur
     """The push before the second plate arrives (harness.push) and the squeeze
     (harness.squeeze) of draws ``rest`` (default all): where the push moved the closing
     line across the object, the contacts and their closure are found again from the jaw
-    starts in the object's frame after it. Returns the contacts, their closure, the
-    squeeze and the push."""
+    starts in the object's frame after it; the squeeze may turn the object back through
+    the push's turn before its own limit (SQUEEZE_LIMIT) counts. Returns the contacts,
+    their closure, the squeeze and the push."""
     field = np.broadcast_to(np.asarray(field, dtype=np.int64), (len(g1),))
     gamma = np.broadcast_to(np.asarray(gamma, dtype=float), (len(g1),))
     pushed = push(fields, g1, g2, field, contacts, gamma, jaw, active=rest)
@@ -215,7 +216,10 @@ def push_and_squeeze(fields: SDFBatch, g1, g2, field, contacts: Contacts, closur
                                          with_quality=False)
         contacts = replace_rows(contacts, rows, again)
     skip = closure if rest is None else closure | ~rest
-    return contacts, closure, squeeze(fields, pushed.g1, pushed.g2, field, contacts, skip, gamma, jaw, scale), pushed
+    # The squeeze turns the object back through the push's turn before its own limit counts.
+    limit = SQUEEZE_LIMIT + np.abs(pushed.turn)
+    return (contacts, closure, squeeze(fields, pushed.g1, pushed.g2, field, contacts, skip, gamma, jaw, scale,
+                                       limit=limit), pushed)
 
 
 def _flush_point(contacts: Contacts, first, direction, com):

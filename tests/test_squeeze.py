@@ -56,11 +56,9 @@ def test_an_ellipse_turns_towards_its_minor_axis_until_the_plates_are_in_force_c
     grasp stays through it). The turn is the first whole step at which the turned grasp
     is in force closure, found here by judging every turned grasp on its own; the
     settled contacts lie the ellipse's closed-form width apart at theta0 - turn, and
-    turning the other way as far would not have closed (it closes again only near the
-    major axis, some 60 degrees on)."""
+    turning the other way would never have closed."""
     mu, theta0 = 0.2, math.radians(20.0)
-    steps = np.arange(1, 11) * SQUEEZE_STEP  # 20 degrees, within SQUEEZE_LIMIT
-    assert steps[-1] <= SQUEEZE_LIMIT
+    steps = np.arange(1, int(round(SQUEEZE_LIMIT / SQUEEZE_STEP)) + 1) * SQUEEZE_STEP
     for sense in (-1.0, 1.0):  # towards the minor axis, then away from it
         turned = [run(ellipse, theta0 + sense * a, mu)[1][0] for a in steps]
         if sense < 0:
@@ -89,7 +87,7 @@ def test_without_friction_the_squeeze_stops_at_the_widths_minimum(ellipse, monke
     width). From 9 degrees off the minor axis the ellipse turns towards it, where its
     width is least and the couple vanishes; the fifth 2-degree step would carry it past
     (to -1 degree), where the couple reverses. So the squeeze gives up after at most five
-    searches for the contacts (the limit would allow 45) and leaves the first contacts."""
+    searches for the contacts (the limit would allow ten) and leaves the first contacts."""
     import harness.squeeze
 
     searches = []
@@ -102,7 +100,7 @@ def test_without_friction_the_squeeze_stops_at_the_widths_minimum(ellipse, monke
     contacts, closed, out = run(ellipse, math.radians(9.0), 0.0)
     assert not closed[0] and not out.squeezed[0] and out.turn[0] == 0.0
     np.testing.assert_array_equal(out.c1, contacts.c1)
-    assert SQUEEZE_STEP == pytest.approx(math.radians(2.0)) and SQUEEZE_LIMIT == pytest.approx(math.radians(90.0))
+    assert SQUEEZE_STEP == pytest.approx(math.radians(2.0)) and SQUEEZE_LIMIT == pytest.approx(math.radians(20.0))
     assert 1 <= len(searches) <= 5
 
 
