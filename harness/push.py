@@ -59,9 +59,10 @@ PUSH_MARGIN = 0.003
 #: A plate within this distance (m) of the surface touches it: the contacts' flush
 #: tolerance (harness.grasp.PATCH_DEPTH).
 TOUCH = PATCH_DEPTH
-#: A push that moves the closing line by less than this (m) at either contact leaves the
-#: contacts where they were (found to well under a micrometre: a tenth of a millimetre
-#: is far below anything the plates resolve).
+#: A push that does not turn the object and moves the closing line by less than this (m)
+#: across it at either contact leaves the contacts where they were (they are found to
+#: well under a micrometre; a tenth of a millimetre is far below anything the plates
+#: resolve). A push that turns the object at all has its contacts found again.
 NEGLIGIBLE = 1e-4
 #: Steps followed at most: a cost cap; a push ends sooner when the jaws meet.
 MAX_STEPS = 200
