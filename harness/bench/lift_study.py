@@ -154,6 +154,54 @@ SLIDES = (SlideCase("ring"), SlideCase("disk", radius=0.03), SlideCase("ring", f
 
 
 @dataclass(frozen=True)
+class PushCase:
+    """The push's controlled case (docs/lift.md, "The push"): a bar 8 cm x 6 mm x 2.4 cm
+    gripped across its width along a line ``alpha`` (degrees) off its wall's normal
+    through a point ``offset`` (m) from its middle, the gripper's centre moved by a
+    distance D along the closing line, so that the nearer plate pushes the bar about D
+    across the table before the other arrives (harness.push). The sweep's 'offset' is D."""
+
+    alpha: float
+    offset: float
+    density: float
+    friction: float = 0.5
+    force: float = 20.0
+    length: float = 0.08
+    width: float = 0.006
+    thickness: float = 0.024
+
+    @property
+    def label(self) -> str:
+        return (f"bar {self.length * 100:g} x {self.width * 1000:g} mm, {self.mass * 1000:.1f} g, "
+                f"{self.alpha:g} deg, {self.offset * 1000:g} mm off the middle")
+
+    @property
+    def mass(self) -> float:
+        return self.density * self.length * self.width * self.thickness
+
+    def scene(self) -> Scene:
+        shape = {"type": "rectangle", "width": self.length, "height": self.width, "center": [0.0, 0.0]}
+        return _solid("push-bar", shape, self.thickness, self.density, self.friction, self.force,
+                      f"<push {self.label}>", cells=120, extent=0.12)
+
+    def offsets(self) -> np.ndarray:
+        """The pushes D (m)."""
+        return np.array([0.0, 0.005, 0.01, 0.02, 0.03])
+
+    def grasp(self, push: float) -> np.ndarray:
+        a = math.radians(self.alpha)
+        u = np.array([math.sin(a), math.cos(a)])
+        centre = np.array([self.offset, 0.0]) + push * u
+        return np.array([centre - 0.045 * u, centre + 0.045 * u])
+
+
+#: The push's controlled cases: square to the wall and 23 degrees off it (friction 0.5, a
+#: cone of 26.6 degrees), 20 and 35 mm from the middle, 3.5 g and 27.6 g.
+PUSHES = tuple(PushCase(alpha, offset, density) for density in (300.0, 2400.0)
+               for alpha, offset in ((0.0, 0.02), (0.0, 0.035), (23.0, 0.02), (23.0, 0.035)))
+
+
+@dataclass(frozen=True)
 class LoadCase:
     """An object gripped where its weight has no torque about the grasp axis, at falling
     grip forces, for the two loads the model leaves out (docs/lift.md, "What it does not
@@ -690,12 +738,14 @@ def benchmark(settings: Settings = Settings()) -> dict:
     in MuJoCo."""
     return {**validate(trials=settings.trials, seed=settings.seed),
             "slide": validate(SLIDES, trials=settings.trials, seed=settings.seed),
+            "push": validate(PUSHES, trials=settings.trials, seed=settings.seed),
             "hang": hang_validate(trials=settings.trials, seed=settings.seed),
             "hang_fine": hang_validate(trials=settings.trials, seed=settings.seed, finer=HANG_FINER),
             "manifold_levers": manifold_levers(seed=settings.seed),
             "loads": load_validate(trials=settings.trials, seed=settings.seed),
             "mujoco": {**validate(trials=settings.trials, seed=settings.seed, engine="mujoco"),
                        "slide": validate(SLIDES, trials=settings.trials, seed=settings.seed, engine="mujoco"),
+                       "push": validate(PUSHES, trials=settings.trials, seed=settings.seed, engine="mujoco"),
                        "hang": hang_validate(trials=settings.trials, seed=settings.seed, engine="mujoco"),
                        "loads": load_validate(trials=settings.trials, seed=settings.seed, engine="mujoco")}}
 
@@ -704,6 +754,8 @@ def format_lines(res: dict) -> list[str]:
     lines = _bar_lines(res)
     if "slide" in res:
         lines += _slide_lines(res["slide"])
+    if "push" in res:
+        lines += _slide_lines(res["push"], "push cases", "pushes of")
     for key in ("hang", "hang_fine"):
         if key in res:
             lines += _hang_lines(res[key])
@@ -718,6 +770,8 @@ def format_lines(res: dict) -> list[str]:
         lines += ["", "the same bars in MuJoCo:", *_bar_lines(res["mujoco"])]
         if "slide" in res["mujoco"]:
             lines += _slide_lines(res["mujoco"]["slide"])
+        if "push" in res["mujoco"]:
+            lines += _slide_lines(res["mujoco"]["push"], "push cases", "pushes of")
         if "hang" in res["mujoco"]:
             lines += _hang_lines(res["mujoco"]["hang"])
         if "loads" in res["mujoco"]:
@@ -767,11 +821,12 @@ def _bar_lines(res: dict) -> list[str]:
     return lines
 
 
-def _slide_lines(res: dict) -> list[str]:
-    """Per slide case and offset (mm): simulated success, P_L and P_F (force closure at
-    the first contacts, before any squeeze)."""
+def _slide_lines(res: dict, title: str = "slide cases", what: str = "the jaws' line") -> list[str]:
+    """Per slide (or push) case and offset (or push, mm): simulated success, P_L and P_F
+    (force closure at the first contacts, before any push or squeeze)."""
     offsets = ", ".join(f"{p['offset'] * 1e3:g}" for p in res["rows"][0]["points"])
-    lines = [f"slide cases ({res['engine']}): the jaws' line {offsets} mm off the centre, "
+    where = "mm off the centre" if title == "slide cases" else "mm"
+    lines = [f"{title} ({res['engine']}): {what} {offsets} {where}, "
              f"{res['trials_per_offset']} trials and {res['analytic_draws']} analytic draws per offset: "
              f"success / P_L / P_F"]
     for r in res["rows"]:
