@@ -254,10 +254,10 @@ def evaluate_draws(grasps, draws: EvaluationDraws, settings: GraspSettings, lift
     force closure (friction_cone; harness.grasp.plate_closure) and, with the lift, the
     plates' squeeze does not bring them into it nor hold the object in the plane either
     (harness.squeeze; the lift's contacts are those after the push of the plate that
-    arrives first, harness.push), and then, in force closure or so held, when the weight slides the
-    object out (weight_slip) or turns it back onto the table (weight_torque) (harness.lift,
-    with the shape sample's area and centre of mass and draw i's pressure deviates, at the
-    contacts where the squeeze stopped).
+    arrives first, harness.push), and then, in force closure or so held, when the weight
+    slides the object out (weight_slip) or turns it back onto the table (weight_torque)
+    (harness.lift, with the shape sample's area and centre of mass and draw i's pressure
+    deviates, at the contacts where the squeeze stopped).
     With the lift, the reasons are judged on the shape sample's body, the largest region
     the physics extrudes: on a sample in several pieces the jaws pass where the other
     pieces would be (harness.grasp.body_fields), so a draw P_F holds on a small piece is

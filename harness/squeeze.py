@@ -76,8 +76,9 @@ def squeeze(fields: SDFBatch, g1, g2, field_index, contacts: Contacts, closure, 
     plates are in force closure (squeezed), the couple changes sign without closure (the
     width's local minimum reached out of closure: the squeeze holds it there) or vanishes,
     a contact is lost (a plate slid off the object, or meets it within SQUEEZE_MARGIN of
-    where it starts looking), or the turn reaches ``limit`` (rad; float or (B,)). A draw the turn does not
-    bring into closure then slides from its first contacts (:func:`_slide`), up to
+    where it starts looking), or the turn reaches ``limit`` (rad; float or (B,)). A draw
+    the turn does not bring into closure then slides from its first contacts
+    (:func:`_slide`), up to
     ``slide_limit`` (m; 0 turns only), unless neither the couple nor the walls' push
     across u acts there: then the plates hold it in the plane where it is. friction:
     float or (B,) coefficients.
