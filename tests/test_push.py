@@ -156,13 +156,14 @@ def test_the_oblique_end_grasp_of_the_controlled_case_is_lost_past_a_2_cm_push()
     held after pushes up to 1 cm and lost after 2 and 3 cm in both engines; square to
     the wall 20 mm from the middle it was held after every push. P_L says the same (100
     draws of 1 mm approach noise each)."""
-    from harness.bench.lift_study import PushCase, _exact_draws
+    from harness.bench.lift_study import Bar, PushCase, _exact_draws
 
     def p_l(case, push):
         settings, _, draws = _exact_draws(case.scene(), 100, 0, "test-push", case.label)
         return evaluate_draws(case.grasp(push), draws, settings).lifted.mean()
 
-    oblique, square = PushCase(23.0, 0.035, 300.0), PushCase(0.0, 0.02, 300.0)
+    bar = Bar(0.08, 300.0, 0.5, 20.0, width=0.006, thickness=0.024)
+    oblique, square = PushCase(23.0, 0.035, bar), PushCase(0.0, 0.02, bar)
     assert min(p_l(oblique, d) for d in (0.0, 0.01)) > 0.95
     assert max(p_l(oblique, d) for d in (0.02, 0.03)) < 0.15
     assert min(p_l(square, d) for d in (0.0, 0.01, 0.02, 0.03)) > 0.95

@@ -64,9 +64,10 @@ class Bar:
     def mass(self) -> float:
         return self.density * self.length * self.width * self.thickness
 
-    def scene(self) -> Scene:
+    def scene(self, cells: int = 40, extent: float = 0.2) -> Scene:
         shape = {"type": "rectangle", "width": self.length, "height": self.width, "center": [0.0, 0.0]}
-        return _solid("bar", shape, self.thickness, self.density, self.friction, self.force, f"<bar {self.label}>")
+        return _solid("bar", shape, self.thickness, self.density, self.friction, self.force, f"<bar {self.label}>",
+                      cells=cells, extent=extent)
 
     def offsets(self) -> np.ndarray:
         """From the centre to 5 mm short of the bar's end."""
@@ -163,26 +164,20 @@ class PushCase:
 
     alpha: float
     offset: float
-    density: float
-    friction: float = 0.5
-    force: float = 20.0
-    length: float = 0.08
-    width: float = 0.006
-    thickness: float = 0.024
+    bar: Bar
 
     @property
     def label(self) -> str:
-        return (f"bar {self.length * 100:g} x {self.width * 1000:g} mm, {self.mass * 1000:.1f} g, "
+        return (f"bar {self.bar.length * 100:g} x {self.bar.width * 1000:g} mm, {self.mass * 1000:.1f} g, "
                 f"{self.alpha:g} deg, {self.offset * 1000:g} mm off the middle")
 
     @property
     def mass(self) -> float:
-        return self.density * self.length * self.width * self.thickness
+        return self.bar.mass
 
     def scene(self) -> Scene:
-        shape = {"type": "rectangle", "width": self.length, "height": self.width, "center": [0.0, 0.0]}
-        return _solid("push-bar", shape, self.thickness, self.density, self.friction, self.force,
-                      f"<push {self.label}>", cells=120, extent=0.12)
+        """On 1 mm cells: the bar is 6 mm wide."""
+        return self.bar.scene(cells=120, extent=0.12)
 
     def offsets(self) -> np.ndarray:
         """The pushes D (m)."""
@@ -197,7 +192,8 @@ class PushCase:
 
 #: The push's controlled cases: square to the wall and 23 degrees off it (friction 0.5, a
 #: cone of 26.6 degrees), 20 and 35 mm from the middle, 3.5 g and 27.6 g.
-PUSHES = tuple(PushCase(alpha, offset, density) for density in (300.0, 2400.0)
+PUSHES = tuple(PushCase(alpha, offset, Bar(0.08, density, 0.5, 20.0, width=0.006, thickness=0.024))
+               for density in (300.0, 2400.0)
                for alpha, offset in ((0.0, 0.02), (0.0, 0.035), (23.0, 0.02), (23.0, 0.035)))
 
 
