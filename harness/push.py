@@ -152,10 +152,9 @@ def push(fields: SDFBatch, g1, g2, field_index, contacts: Contacts, friction, ja
         normal_out = np.where(first[:, None], current.n1, current.n2)
         edge = np.where(first, current.edge1, current.edge2)
         direction = np.where(first[:, None], u[rows], -u[rows])
-        point, pivot_normal, still = _flush_point(current, first, direction, com[rows])
+        point, still = _flush_point(current, first, direction, com[rows])
         point = np.where(np.isnan(point[:, :1]), pick, point)
-        normal = np.where(edge[:, None], -normal_out, direction)
-        normal = np.where(np.isnan(pivot_normal[:, :1]), normal, pivot_normal)
+        normal = np.where(edge[:, None], -normal_out, direction)  # a flush plate is never an edge
         velocity, rate = twist(point - com[rows], normal, direction, friction[rows], spread[rows])
         velocity = np.where(still[:, None], direction, velocity)
         rate = np.where(still, 0.0, rate)
@@ -224,9 +223,10 @@ def push_and_squeeze(fields: SDFBatch, g1, g2, field, contacts: Contacts, closur
 
 
 def _flush_point(contacts: Contacts, first, direction, com):
-    """Where a plate flush on a flat wall pushes (B, 2; NaN for a point or an edge
-    contact), the normal there (B, 2; NaN likewise) and whether the push's line through
-    the centre of mass crosses the flush segment (B,: the object then goes straight)."""
+    """Where a plate flush on a flat wall pushes when the object pivots (B, 2: the flush
+    segment's end nearest the push's line through the centre of mass; NaN for a point
+    or an edge contact, and where it goes straight) and whether that line crosses the
+    flush segment (B,: the object then goes straight)."""
     patch = np.where(first[:, None, None], contacts.patch1, contacts.patch2)
     width = np.where(first, contacts.w1, contacts.w2)
     edge = np.where(first, contacts.edge1, contacts.edge2)
@@ -239,9 +239,7 @@ def _flush_point(contacts: Contacts, first, direction, com):
     still = flush & (low <= 0.0) & (high >= 0.0)
     nearest = np.argmin(np.where(touching, np.abs(side), np.inf), axis=1)
     point = np.take_along_axis(patch, nearest[:, None, None], axis=1)[:, 0]
-    point = np.where((flush & ~still)[:, None], point, np.nan)
-    normal = np.where((flush & ~still)[:, None], direction, np.nan)
-    return point, normal, still
+    return np.where((flush & ~still)[:, None], point, np.nan), still
 
 
 def _line_shift(g1, g2, h1, h2, contacts: Contacts) -> np.ndarray:
