@@ -25,10 +25,11 @@ import numpy as np
 
 from scipy.special import ndtr
 
-from harness.grasp import OK, Grasp, SDFBatch, find_contacts, interpolate
+from harness.grasp import OK, Grasp, SDFBatch, find_contacts, interpolate, plate_closure
 from harness.lift import MassBelief
 from harness.quality import draw_evaluation, ranking_scores
 from harness.scp import SCPSettings, minimize
+from harness.squeeze import squeeze
 from planners import candidates as cand
 from planners.base import Plan, Planner, Problem, Stopwatch, check_quality
 
@@ -114,6 +115,7 @@ class GPGPISOpt(Planner):
         f0, _, g0 = objective(x0)
         best = np.lexsort((f0, np.maximum(g0, 0).sum(axis=1) > 0.5))[: self.initialisations]
         x0, starts = x0[best], starts[best]
+        start_violation = np.maximum(g0[best], 0.0).sum(axis=1)
         clock.lap("initialisation")
         budget = None if problem.time_budget_s is None else max(0.0, problem.time_budget_s - clock.elapsed())
         settings = SCPSettings(trust_init=2.0, trust_min=0.01, trust_max=8.0, max_iterations=self.max_iterations,
@@ -128,37 +130,41 @@ class GPGPISOpt(Planner):
         jaws = objective.jaw_starts(result.x)
         valid = objective.valid(jaws)
         order = [i for i in order if valid[i]]
-        chosen, estimate, message = None, None, ""
+        estimate, message = None, ""
         if order and self.finalists > 1:
             # Infeasible optima (out of the friction cone on the mean) are not executed
-            # (status "infeasible"): they compete only when no optimum is feasible.
+            # (status "infeasible"): they compete only when no optimum is feasible. The
+            # feasible starts compete beside them: the SCP descends the surrogate, not the
+            # re-ranking's estimate, and an optimum can be worse than its start there.
             finalists = ([i for i in order if feasible[i]] or order)[: self.finalists]
-            entries = jaws[finalists]
+            entries, ok = jaws[finalists], feasible[finalists]
+            start_ok = (start_violation <= settings.constraint_tol) & objective.valid(starts)
+            entries = np.concatenate([entries, starts[start_ok]])
+            ok = np.concatenate([ok, np.ones(int(start_ok.sum()), dtype=bool)])
             if self.quality == "lift":
-                # Each finalist competes as it is and slid along its closing line so that
-                # both plates reach the mean shape together (P_L's push, harness.push).
+                # Each competes as it is and slid along its closing line so that both
+                # plates reach the mean shape together (P_L's push, harness.push).
                 entries = np.concatenate([entries, centred(entries, objective, problem.settings.jaw_width)])
-                finalists = finalists + finalists
+                ok = np.concatenate([ok, ok])
             draws = draw_evaluation(belief, self.rerank_samples, *rerank_rng.spawn(4))
             score, tie = ranking_scores(entries, draws, problem.settings, self.quality == "lift")
             pick = int(np.lexsort((-tie, -score))[0])  # as gp-p ranks: best score, then Ferrari-Canny
-            chosen, estimate = finalists[pick], float(score[pick])
-            jaws = jaws.copy()
-            jaws[chosen] = entries[pick]
-            message = f"finalists re-ranked on {self.rerank_samples} draws"
+            estimate, message = float(score[pick]), f"finalists and starts re-ranked on {self.rerank_samples} draws"
+            grasp, status = entries[pick], ("ok" if ok[pick] else "infeasible")
             clock.lap("rerank")
         elif order:
             chosen = order[0]
             estimate = float(objective.surrogate(result.x[chosen:chosen + 1])[0])
-        if chosen is None:  # no optimised grasp is executable: fall back to the best start
-            jaws, chosen, message = starts, 0, "no optimised grasp was executable; returning a start"
-        status = "ok" if feasible[chosen] else "infeasible"
+            grasp, status = jaws[chosen], ("ok" if feasible[chosen] else "infeasible")
+        else:  # no optimised grasp is executable: fall back to the best start
+            grasp, message = starts[0], "no optimised grasp was executable; returning a start"
+            status = "ok" if feasible[0] else "infeasible"
         if any(s == "time_limit" for s in result.status):
             status = "budget"
         trace = _trace(result, settings.constraint_tol)
-        g = jaws[chosen]
-        return Plan(Grasp(tuple(g[0]), tuple(g[1])), status, estimate, iterations=int(result.iterations.max()),
-                    evaluations=result.evaluations, seconds=clock.phases, trace=trace, message=message)
+        return Plan(Grasp(tuple(grasp[0]), tuple(grasp[1])), status, estimate,
+                    iterations=int(result.iterations.max()), evaluations=result.evaluations, seconds=clock.phases,
+                    trace=trace, message=message)
 
 
 def centred(jaws: np.ndarray, objective: "SurrogateObjective", jaw_width: float) -> np.ndarray:
@@ -259,14 +265,30 @@ class SurrogateObjective:
         s2 = (g2[:, None, :] + shift[None, :, 1, None] * perp[:, None, :]).reshape(-1, 2)
         c = find_contacts(self.mean, s1, s2, self.settings.jaw_width, field_index=np.zeros(len(s1), dtype=np.int64))
         r = len(x)
+        settled = None if self.mass is None else self._squeezed(s1, s2, c).reshape(r, -1)
         return (c.c1.reshape(r, -1, 2), c.c2.reshape(r, -1, 2), c.n1.reshape(r, -1, 2), c.n2.reshape(r, -1, 2),
                 (c.status == OK).reshape(r, -1), c.w1.reshape(r, -1), c.w2.reshape(r, -1),
-                (c.edge1 | c.edge2).reshape(r, -1))
+                (c.edge1 | c.edge2).reshape(r, -1), settled)
+
+    def _squeezed(self, s1, s2, c):
+        """The lift's smooth probability (B,) at the contacts where the plates' squeeze
+        (harness.squeeze) settles the mean shape, for sigma points out of force closure
+        on it that it brings into closure (or holds in the plane); 0 for the rest."""
+        belief, settings = self.problem.belief, self.settings
+        closed, _ = plate_closure(c, settings.friction, belief.center_of_mass, belief.characteristic_length,
+                                  with_quality=False)
+        out = squeeze(self.mean, s1, s2, 0, c, closed, settings.friction, settings.jaw_width,
+                      belief.characteristic_length)
+        held = out.squeezed & ~closed
+        lift = np.zeros(len(s1))
+        lift[held] = self.mass.margin(out.c1[held], out.c2[held], out.w1[held], out.w2[held], settings.friction,
+                                      settings, self.h, (out.edge1 | out.edge2)[held])
+        return lift
 
     def _terms(self, x) -> dict:
         """The objective's and constraints' parts at rows x (see the class docstring)."""
         r = len(x)
-        c1, c2, n1, n2, ok, w1, w2, edge = self._evaluate(x)
+        c1, c2, n1, n2, ok, w1, w2, edge, squeezed = self._evaluate(x)
         line = c2 - c1
         line /= np.maximum(np.linalg.norm(line, axis=-1, keepdims=True), 1e-12)
         a1 = np.arccos(np.clip(-np.einsum("rsk,rsk->rs", n1, line), -1.0, 1.0))
@@ -284,17 +306,22 @@ class SurrogateObjective:
         reach = np.stack([np.linalg.norm(jaws[:, 0] - c1[:, _NOMINAL], axis=1),
                           np.linalg.norm(jaws[:, 1] - c2[:, _NOMINAL], axis=1)], axis=1)
         reach = np.where(hit[:, None], reach, self.gap)
+        cone = np.stack([a1[:, _NOMINAL], a2[:, _NOMINAL]], axis=1) - self.cone
         if self.mass is not None:
+            # A nominal grasp the squeeze settles meets its cone constraints where it settles.
+            cone = np.where((squeezed[:, _NOMINAL] > 0)[:, None], np.minimum(cone, 0.0), cone)
             lift = np.zeros(ok.shape)
             lift[ok] = self.mass.margin(c1[ok], c2[ok], w1[ok], w2[ok], self.settings.friction, self.settings,
                                         self.h, edge[ok])
-            hold = hold * lift
+            # Out of the cone, the plates squeeze the object until they are in it (or
+            # cannot): P_L's planar step, followed on the mean shape.
+            hold = hold * lift + (1.0 - hold) * squeezed
         return {
             "quality": np.where(ok, hold, 0.0) @ _W,
             "uncertainty": self.nu * np.where(hit, var.sum(axis=0), 0.0),
             "pull": 1e-3 * (((reach - self.gap) / self.h) ** 2).sum(axis=1),
             # A nominal grasp that finds no contacts violates its cone constraints by a radian.
-            "cone": np.where(hit[:, None], np.stack([a1[:, _NOMINAL], a2[:, _NOMINAL]], axis=1) - self.cone, 1.0),
+            "cone": np.where(hit[:, None], cone, 1.0),
             "width": ((np.linalg.norm(jaws[:, 1] - jaws[:, 0], axis=1) - self.settings.opening) / self.h)[:, None],
             "clear": (self.gap - self.settings.sigma_g - reach) / self.h,
         }
