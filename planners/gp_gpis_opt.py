@@ -3,10 +3,11 @@ programming for a smooth surrogate of P_F on the mean shape under approach noise
 shape uncertainty, minus a penalty on shape uncertainty at the contacts, subject to
 antipodal constraints. With ``quality = "lift"`` the surrogate is of P_L instead: each
 sigma point's P_F term times the lift model's smooth probability, with the centre of
-mass's posterior mean and spread (harness.lift.MassBelief), and each finalist competes
-in the re-ranking as it is and slid along its closing line so that both plates reach the
-mean shape together (:func:`centred`: the lift model's push, which the surrogate does
-not model).
+mass's posterior mean and spread (harness.lift.MassBelief), plus, out of the cone, the
+lift's probability where the plates' squeeze settles the mean shape; the optima and the
+screened starts are re-ranked by P_L, each as it is and slid along its closing line so
+that both plates reach the mean shape together (:func:`centred`: the lift model's push,
+which the surrogate does not model).
 
 Decision variables: the two jaw start points (in cells), not the contact points as in the
 paper. With jaw plates a grasp's contacts lie on the plate's edges as often as on its
@@ -212,8 +213,11 @@ class SurrogateObjective:
     (quality "lift") each sigma point's term is multiplied by the lift's smooth
     probability at its contacts (MassBelief.margin: the centre of mass's posterior
     distance from the contact line and its spread, the weight, the patches, the hang),
-    and the objective maximises that P~_L instead.
-    Inequalities: both nominal contacts in their friction cones (radians); the width
+    and the rest of the sigma point's probability (out of the cone) by the lift's at the
+    contacts where the plates' squeeze settles the mean shape (0 where it does not:
+    :meth:`_squeezed`); the objective maximises that P~_L instead.
+    Inequalities: both nominal contacts in their friction cones (radians; with a
+    MassBelief, met where the squeeze settles the nominal grasp); the width
     within the opening; each jaw start at least a clearance minus sigma_g from its
     contact (cells). Bounds keep the jaw starts in the grid.
     """

@@ -109,6 +109,33 @@ def test_gp_gpis_opt_lift_slides_its_optima_so_both_plates_reach_the_mean_shape_
     np.testing.assert_allclose(after.c2, before.c2, atol=1e-9)
 
 
+def test_gp_gpis_opt_lift_surrogate_follows_the_plates_squeeze_on_the_mean_shape(beliefs):
+    """The rectangle (6 x 3 cm) grasped across its long faces with the closing line 12
+    degrees off their normal, at friction 0.1 (cone 5.7 degrees): the tilted plates touch
+    with their corners, whose line is further off (29 degrees), so the force-closure
+    surrogate is nearly 0 and its cone constraint violated; the plates' squeeze turns the
+    rectangle until both lie flush (harness.squeeze), where this light box hangs from a
+    20 N grip for certain, so the lift surrogate is about 1 and its constraint met. The
+    grasp square to the faces is in closure on the mean: no squeeze, and the lift
+    surrogate is the force-closure one times a lift of about 1."""
+    from harness.lift import MassBelief
+    from planners.gp_gpis_opt import SurrogateObjective
+
+    belief = beliefs("rectangle")
+    problem = Problem.for_belief(belief, resolve(belief.scene, {"sigma_g": 0.001, "friction": 0.1}))
+    mass = MassBelief.of_posterior(belief, problem.settings, 64, stream(0, "test-squeeze-surrogate"))
+    lift = SurrogateObjective(problem, 1.0, math.radians(5.0), mass)
+    closure = SurrogateObjective(problem, 1.0, math.radians(5.0), None)
+    u = np.array([[math.sin(math.radians(a)), math.cos(math.radians(a))] for a in (12.0, 0.0)])
+    jaws = np.stack([-0.04 * u, 0.04 * u], axis=1)
+    x = jaws.reshape(-1, 4) / lift.h
+    p_l, p_f = lift.surrogate(x), closure.surrogate(x)
+    assert p_f[0] < 0.01 and p_l[0] >= 0.95
+    assert p_l[1] == pytest.approx(p_f[1], abs=0.02) and p_f[1] > 0.1
+    cone_lift, cone_closure = lift(x)[2][:, :2], closure(x)[2][:, :2]
+    assert (cone_lift <= 0).all() and (cone_closure[0] > 0.2).all() and (cone_closure[1] <= 0).all()
+
+
 class _Outside(Planner):
     name = "outside"
     description = "returns a grasp outside the grid"
