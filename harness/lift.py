@@ -238,3 +238,12 @@ class MassBelief:
         reach = (np.einsum("vk,bk->bv", self.hull, normal) - np.einsum("bk,bk->b", c1, normal)[:, None]).max(axis=1)
         return smooth_lift(line_distance(com, c1, c2), distance_sd, self.weight, friction, w1, w2, reach,
                            reach_scale, settings, edge)
+
+    def settled_margin(self, settled, rows, friction, settings: GraspSettings, reach_scale: float) -> np.ndarray:
+        """:meth:`margin` (B,) at the contacts where the plates' squeeze left each grasp
+        (``settled``, a harness.squeeze.Squeeze of B grasps) on the grasps ``rows`` ((B,)
+        bool), 0 on the others."""
+        out = np.zeros(len(rows))
+        out[rows] = self.margin(settled.c1[rows], settled.c2[rows], settled.w1[rows], settled.w2[rows], friction,
+                                settings, reach_scale, (settled.edge1 | settled.edge2)[rows])
+        return out

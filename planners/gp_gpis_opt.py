@@ -283,11 +283,7 @@ class SurrogateObjective:
                                   with_quality=False)
         out = squeeze(self.mean, s1, s2, 0, c, closed, settings.friction, settings.jaw_width,
                       belief.characteristic_length)
-        held = out.squeezed & ~closed
-        lift = np.zeros(len(s1))
-        lift[held] = self.mass.margin(out.c1[held], out.c2[held], out.w1[held], out.w2[held], settings.friction,
-                                      settings, self.h, (out.edge1 | out.edge2)[held])
-        return lift
+        return self.mass.settled_margin(out, out.squeezed & ~closed, settings.friction, settings, self.h)
 
     def _terms(self, x) -> dict:
         """The objective's and constraints' parts at rows x (see the class docstring)."""

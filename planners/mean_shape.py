@@ -47,8 +47,5 @@ class MeanShape(Planner):
         # (harness.squeeze).
         c, closed, settled, _ = push_and_squeeze(mean, grasps[:, 0], grasps[:, 1], 0, c, closed, settings.friction,
                                               settings.jaw_width, belief.characteristic_length)
-        held = closed | settled.squeezed
-        lift = np.zeros(len(grasps))
-        lift[held] = mass.margin(settled.c1[held], settled.c2[held], settled.w1[held], settled.w2[held],
-                                 settings.friction, settings, belief.grid.cell, (settled.edge1 | settled.edge2)[held])
+        lift = mass.settled_margin(settled, closed | settled.squeezed, settings.friction, settings, belief.grid.cell)
         return lift, quality
