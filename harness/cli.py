@@ -397,8 +397,14 @@ def _bench_settings(args) -> dict:
             "planning": planning_study.Settings(**sizes, bandit=bandit),
             "bandit": bandit,
             "engines": engines_study.Settings(out=Path(args.out or "results/engines"), workers=args.workers),
-            "regimes": regimes_study.Settings(out=Path(args.out or "results/regimes"), engines=tuple(args.engines),
-                                              workers=args.workers, scheduler=args.scheduler)}
+            "regimes": regimes_study.Settings(out=Path(args.out or _regimes_folder(args.objects)),
+                                              engines=tuple(args.engines), workers=args.workers,
+                                              scheduler=args.scheduler, objects=args.objects)}
+
+
+def _regimes_folder(object_set: str) -> str:
+    """bench regimes' default folder: each object set its own (their runs differ in their scenes)."""
+    return "results/regimes" if object_set == "sweep" else f"results/regimes-{object_set}"
 
 
 def _bench_names() -> list[str]:
@@ -567,6 +573,10 @@ def build_parser() -> argparse.ArgumentParser:
                        help="bench engines and regimes: worker processes of each run (default: one per core)")
     bench.add_argument("--scheduler", default=None, metavar="ADDRESS",
                        help="bench regimes: run on a Dask cluster ('local' or tcp://host:8786), as eval does")
+    bench.add_argument("--objects", choices=("sweep", "fresh"), default="sweep",
+                       help="bench regimes: the object set: 'sweep' (the 24 objects the lift model and the "
+                            "planners were settled on, six held out; default) or 'fresh' (24 other objects of "
+                            "the same families, all held out; default folder results/regimes-fresh)")
     bench.add_argument("--engines", type=_engine_list, default=("pybullet",),
                        help="bench regimes: the engines to run the sweep in, comma-separated "
                             "(default pybullet; pybullet,mujoco runs both)")

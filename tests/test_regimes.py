@@ -47,6 +47,26 @@ def test_objects_are_scenes_of_their_size(tmp_path):
     assert [o.scene_text(0.11, 1000.0) for o in again] == [o.scene_text(0.11, 1000.0) for o in everything]
 
 
+def test_the_fresh_objects_are_other_shapes_all_held_out(tmp_path):
+    """bench regimes --objects fresh: numbers 4-7 of each family, every one held out, none
+    the same shape as a sweep object, each a valid scene of its size; the CLI's choices are
+    the object sets."""
+    from harness.bench.regime_objects import OBJECT_SETS, fresh_objects
+    from harness.cli import build_parser
+
+    fresh, sweep = fresh_objects(), objects()
+    assert len(fresh) == 24 and all(o.held_out for o in fresh)
+    assert sorted(o.name for o in fresh) == sorted(f"{f}_{k}" for f in FAMILIES for k in range(4, 8))
+    assert not {o.scene_text(0.11, 1000.0) for o in fresh} & {o.scene_text(0.11, 1000.0) for o in sweep}
+    for obj in fresh:
+        path = tmp_path / f"{obj.name}.toml"
+        path.write_text(obj.scene_text(0.11, 1000.0))
+        hull = np.asarray(load_scene(path).shape.convex_hull.exterior.coords)
+        assert 0.7 * 0.11 <= np.linalg.norm(hull[:, None] - hull[None], axis=-1).max() <= 1.25 * 0.11, obj.name
+    args = build_parser().parse_args(["bench", "regimes", "--objects", "fresh"])
+    assert args.objects == "fresh" and set(OBJECT_SETS) == {"sweep", "fresh"}
+
+
 @pytest.fixture(scope="module")
 def sweep(tmp_path_factory):
     out = tmp_path_factory.mktemp("regimes")

@@ -140,18 +140,25 @@ def write_objects(out: Path, regimes=REGIMES, objects=None) -> dict[str, list[Pa
 @dataclass(frozen=True)
 class Settings:
     """The folder of the runs, objects and tables; the engines; worker processes per run
-    (None: one per core); a Dask scheduler (None: local processes)."""
+    (None: one per core); a Dask scheduler (None: local processes); the object set
+    (:data:`~harness.bench.regime_objects.OBJECT_SETS`: 'sweep', the 24 objects the model
+    and planners were settled on, six of them held out; 'fresh', 24 others of the same
+    families, all held out)."""
 
     out: Path = Path("results/regimes")
     engines: tuple = ("pybullet",)
     workers: int | None = None
     scheduler: str | None = None
+    objects: str = "sweep"
 
 
 def benchmark(settings: Settings = Settings(), log=print) -> dict:
     """Run (or resume) every regime in each engine, then :func:`study`."""
-    return run(out=Path(settings.out), engines=settings.engines, workers=settings.workers,
-               scheduler=settings.scheduler, log=log)
+    from harness.bench.regime_objects import OBJECT_SETS
+
+    result = run(out=Path(settings.out), engines=settings.engines, workers=settings.workers,
+                 scheduler=settings.scheduler, objects=OBJECT_SETS[settings.objects](), log=log)
+    return {**result, "object_set": settings.objects}
 
 
 def run(out: Path = Path("results/regimes"), engines=("pybullet",), workers: int | None = None,
@@ -423,7 +430,8 @@ def regime_map(rows: pd.DataFrame, path: Path) -> Path:
 
 def format_lines(res: dict) -> list[str]:
     """The per-regime table (P_L and the lift planners' differences) as text."""
-    lines = []
+    lines = [] if "object_set" not in res else [f"objects: {res['object_set']} ({len(res['objects']['design'])} "
+                                                 f"design, {len(res['objects']['held_out'])} held out)"]
     for engine in dict.fromkeys(r["engine"] for r in res["rows"]):
         lines.append(f"{engine}: regime, part, plans, share of plans below 0.9, P_F Spearman/Brier, "
                      f"P_L Spearman/Brier/mean, the Brier floor, the other engine's success as the estimate "
