@@ -397,14 +397,8 @@ def _bench_settings(args) -> dict:
             "planning": planning_study.Settings(**sizes, bandit=bandit),
             "bandit": bandit,
             "engines": engines_study.Settings(out=Path(args.out or "results/engines"), workers=args.workers),
-            "regimes": regimes_study.Settings(out=Path(args.out or _regimes_folder(args.objects)),
-                                              engines=tuple(args.engines), workers=args.workers,
-                                              scheduler=args.scheduler, objects=args.objects)}
-
-
-def _regimes_folder(object_set: str) -> str:
-    """bench regimes' default folder: each object set its own (their runs differ in their scenes)."""
-    return "results/regimes" if object_set == "sweep" else f"results/regimes-{object_set}"
+            "regimes": regimes_study.Settings(out=Path(args.out) if args.out else None, engines=tuple(args.engines),
+                                              workers=args.workers, scheduler=args.scheduler, objects=args.objects)}
 
 
 def _bench_names() -> list[str]:

@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -65,6 +66,7 @@ def test_the_fresh_objects_are_other_shapes_all_held_out(tmp_path):
         assert 0.7 * 0.11 <= np.linalg.norm(hull[:, None] - hull[None], axis=-1).max() <= 1.25 * 0.11, obj.name
     args = build_parser().parse_args(["bench", "regimes", "--objects", "fresh"])
     assert args.objects == "fresh" and set(OBJECT_SETS) == {"sweep", "fresh"}
+    assert rs.default_folder("fresh") != rs.default_folder("sweep") == Path("results/regimes")
 
 
 @pytest.fixture(scope="module")

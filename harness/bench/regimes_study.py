@@ -139,25 +139,33 @@ def write_objects(out: Path, regimes=REGIMES, objects=None) -> dict[str, list[Pa
 
 @dataclass(frozen=True)
 class Settings:
-    """The folder of the runs, objects and tables; the engines; worker processes per run
-    (None: one per core); a Dask scheduler (None: local processes); the object set
+    """The folder of the runs, objects and tables (None: :func:`default_folder` of the
+    object set); the engines; worker processes per run (None: one per core); a Dask
+    scheduler (None: local processes); the object set
     (:data:`~harness.bench.regime_objects.OBJECT_SETS`: 'sweep', the 24 objects the model
     and planners were settled on, six of them held out; 'fresh', 24 others of the same
     families, all held out)."""
 
-    out: Path = Path("results/regimes")
+    out: Path | None = None
     engines: tuple = ("pybullet",)
     workers: int | None = None
     scheduler: str | None = None
     objects: str = "sweep"
 
 
+def default_folder(object_set: str) -> Path:
+    """Each object set's own folder (their runs differ in their scenes, so they never share
+    a ledger): results/regimes for the sweep, results/regimes-NAME for another set."""
+    return Path("results/regimes" if object_set == "sweep" else f"results/regimes-{object_set}")
+
+
 def benchmark(settings: Settings = Settings(), log=print) -> dict:
     """Run (or resume) every regime in each engine, then :func:`study`."""
     from harness.bench.regime_objects import OBJECT_SETS
 
-    result = run(out=Path(settings.out), engines=settings.engines, workers=settings.workers,
-                 scheduler=settings.scheduler, objects=OBJECT_SETS[settings.objects](), log=log)
+    out = Path(settings.out) if settings.out is not None else default_folder(settings.objects)
+    result = run(out=out, engines=settings.engines, workers=settings.workers, scheduler=settings.scheduler,
+                 objects=OBJECT_SETS[settings.objects](), log=log)
     return {**result, "object_set": settings.objects}
 
 
