@@ -169,7 +169,7 @@ def benchmark(settings: Settings = Settings(), log=print) -> dict:
     return {**result, "object_set": settings.objects}
 
 
-def run(out: Path = Path("results/regimes"), engines=("pybullet",), workers: int | None = None,
+def run(out: Path = default_folder("sweep"), engines=("pybullet",), workers: int | None = None,
         scheduler: str | None = None, regimes=REGIMES, objects=None, planners: list | None = None,
         posterior_trials: int = POSTERIOR_TRIALS, truth_trials: int = TRUTH_TRIALS,
         analytic_draws: int = ANALYTIC_DRAWS, log=print) -> dict:
