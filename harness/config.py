@@ -72,6 +72,10 @@ class ExperimentConfig:
             d.pop(key)
         d["scenes"] = {name: hashlib.sha256(Path(p).read_bytes()).hexdigest()
                        for name, p in zip(self.scene_names, self.scenes, strict=True)}
+        # Recorded whether or not the config sets it: a ledger whose samples' bodies were
+        # outlined on the belief's own cells (before body_refinement) is not resumed into
+        # rows made with finer ones.
+        d["body_refinement"] = self.protocol().body_refinement
         return d
 
     @property
@@ -171,6 +175,8 @@ def parse_config(data: dict, source: str, base_dir: Path, default_name: str = "e
                 for key, zero_ok in _PROTOCOL_KEYS.items() if key in phys.data}
     if "solver_iterations" in phys.data:
         protocol["solver_iterations"] = phys.integer("solver_iterations", None, lo=1, hi=10_000)
+    if "body_refinement" in phys.data:
+        protocol["body_refinement"] = phys.integer("body_refinement", None, lo=1, hi=8)
     if "time_step" in protocol and protocol["time_step"] > 0.01:
         raise phys.error("time_step", f"{protocol['time_step']} s is too coarse (at most 0.01 s)")
     for key in ("cone_friction", "table_hull", "convex_clipping"):

@@ -21,6 +21,7 @@ import numpy as np
 from harness import isolation
 from harness.belief import Belief
 from harness.deadline import deadline_s, is_overtime
+from harness.protocol import Protocol
 from harness.quality import EvaluationDraws, evaluate_draws
 from harness.scene import Scene
 from harness.settings import GraspSettings
@@ -216,13 +217,15 @@ class TrialInputs:
         return TrialInputs(polygons, self.approach[trials], self.friction[trials])
 
 
-def posterior_inputs(cell: Cell, trials: int) -> TrialInputs:
-    """Posterior trial i: shape sample i, approach and friction deviates i of the cell's
-    evaluation draws."""
+def posterior_inputs(cell: Cell, trials: int, refinement: int = Protocol.body_refinement) -> TrialInputs:
+    """Posterior trial i: shape sample i (its body outlined on cells ``refinement`` times
+    finer than the belief's, the protocol's ``body_refinement``), approach and friction
+    deviates i of the cell's evaluation draws."""
     from harness.physics.bodies import field_polygon
 
     values = cell.draws.shapes.values[:trials]
-    return TrialInputs([field_polygon(f, cell.belief.grid) for f in values], cell.draws.approach[:trials].copy(),
+    return TrialInputs([field_polygon(f, cell.belief.grid, refinement) for f in values],
+                       cell.draws.approach[:trials].copy(),
                        cell.draws.friction[:trials].copy())
 
 

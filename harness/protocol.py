@@ -13,7 +13,10 @@ class Protocol:
     (harness.physics.trial.ENGINES); the time step and solver iterations are the
     engine's own, chosen by its fidelity study in docs/physics.md (make one with
     :meth:`of`). ``friction_anchor`` and ``convex_clipping`` are Bullet's alone;
-    ``cone_friction`` chooses the elliptic cone over the pyramid in MuJoCo too."""
+    ``cone_friction`` chooses the elliptic cone over the pyramid in MuJoCo too.
+    ``body_refinement`` is how many times finer than the belief's grid a posterior
+    sample's body is outlined (harness.physics.bodies.field_polygon; docs/physics.md,
+    "The sample's body")."""
 
     engine: str = "pybullet"
     time_step: float = 1.0 / 480.0
@@ -40,6 +43,7 @@ class Protocol:
     max_speed: float = 10.0          # m/s: faster means the simulation blew up
     max_spin: float = 200.0          # rad/s: likewise
     skip_free_travel: bool = True    # start the jaws SKIP_MARGIN short of the first contact
+    body_refinement: int = 2         # a posterior sample's body is outlined on cells this many times finer
 
     @classmethod
     def of(cls, engine: str = "pybullet", **overrides) -> "Protocol":

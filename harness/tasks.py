@@ -98,7 +98,7 @@ def _cell(config: ExperimentConfig, path: str, realisation: int, labels: tuple[s
         if row["executed"]:
             analytic.append(pipeline.analytic_row(cell, row, config.analytic_draws, config.posterior_trials))
     return CellResult(scene.name, realisation, plans, analytic,
-                      pipeline.posterior_inputs(cell, config.posterior_trials),
+                      pipeline.posterior_inputs(cell, config.posterior_trials, config.protocol().body_refinement),
                       pipeline.truth_inputs(scene, config.seed, realisation, config.truth_trials),
                       time.perf_counter() - start)
 

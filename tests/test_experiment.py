@@ -277,6 +277,8 @@ BAD_CONFIGS = [
     ('[physics]\ncone_friction = 0\n[[planners]]\nname = "gp-p"', "physics.cone_friction"),
     ('[physics]\ntable_hull = "yes"\n[[planners]]\nname = "gp-p"', "physics.table_hull"),
     ('[physics]\nconvex_clipping = 1\n[[planners]]\nname = "gp-p"', "physics.convex_clipping"),
+    ('[physics]\nbody_refinement = 0\n[[planners]]\nname = "gp-p"', "physics.body_refinement"),
+    ('[physics]\nbody_refinement = 2.5\n[[planners]]\nname = "gp-p"', "physics.body_refinement"),
     ('[physics]\nengine = "mujoco"\nconvex_clipping = true\n[[planners]]\nname = "gp-p"', "physics.convex_clipping"),
     ('colour = "red"\n[[planners]]\nname = "gp-p"', "colour"),
     ('[[planners]]\nname = "gp-p"\n[[planners]]\nname = "gp-p"', "planners[1].label"),
@@ -314,8 +316,8 @@ _keys = st.sampled_from(["seed", "scenes", "realisations", "name", "evaluation.a
                          "evaluation.posterior_trials", "evaluation.truth_trials", "evaluation.sigma_g",
                          "evaluation.friction", "evaluation.time_budget_s", "physics.time_step",
                          "physics.solver_iterations", "physics.batch_size", "physics.cone_friction",
-                         "physics.table_hull", "gripper.opening", "gripper.force", "gripper.sigma_g",
-                         "evaluation.load_factor",
+                         "physics.table_hull", "physics.body_refinement", "gripper.opening", "gripper.force",
+                         "gripper.sigma_g", "evaluation.load_factor",
                          "planners.name", "planners.params.candidates", "bogus"])
 
 
@@ -410,6 +412,14 @@ def test_physics_overrides_reach_the_protocol(tmp_path):
     flipped = str(not Protocol().convex_clipping).lower()
     path = _write(tmp_path, head + f'[physics]\nconvex_clipping = {flipped}\n[[planners]]\nname = "gp-p"', "sat.toml")
     assert load_config(path).protocol().convex_clipping is not Protocol().convex_clipping
+    path = _write(tmp_path, head + '[physics]\nbody_refinement = 1\n[[planners]]\nname = "gp-p"', "coarse.toml")
+    assert (Protocol().body_refinement, load_config(path).protocol().body_refinement) == (2, 1)
+    # the default refinement is in the hash though the config does not name it, so rows
+    # made with another are never resumed into one ledger
+    default = load_config(_write(tmp_path, head + '[[planners]]\nname = "gp-p"', "default.toml"))
+    explicit = _write(tmp_path, head + '[physics]\nbody_refinement = 2\n[[planners]]\nname = "gp-p"', "two.toml")
+    assert default.content()["body_refinement"] == 2 and load_config(path).hash != default.hash
+    assert load_config(explicit).content()["body_refinement"] == 2
 
 
 def test_compare_pairs_two_runs_that_differ_in_physics_only(tiny_run, tmp_path, capsys):

@@ -184,7 +184,8 @@ def write_frames(trials: pd.DataFrame, run: dict, folder: Path, count: int = FRA
             settings = resolve(scene, config.settings, config.protocol())
             cell = pipeline.open_cell(scene, settings, config.seed, r.realisation,
                                       pipeline.cell_draws(config.analytic_draws, config.posterior_trials))
-            inputs = pipeline.posterior_inputs(cell, config.posterior_trials).part(slice(r.trial, r.trial + 1))
+            inputs = pipeline.posterior_inputs(cell, config.posterior_trials, config.protocol().body_refinement)
+            inputs = inputs.part(slice(r.trial, r.trial + 1))
             grasp = pipeline.planned_grasp(plans.loc[(r.scene, r.realisation, r.planner)].to_dict())
             trial = make_trials(settings, grasp, inputs.polygons, inputs.approach, inputs.friction)
             where = Path(folder) / f"{r.scene}-r{r.realisation}-{r.planner}-posterior-{r.trial}"

@@ -19,16 +19,39 @@ from shapely.geometry import Polygon
 
 from harness.canonical import canonical_polygon
 from harness.geometry import Grid, inside_region, largest_region, polygons
+from harness.protocol import Protocol
 
 #: Simplification tolerance, in cells: a quarter cell moves the outline far less than
 #: the posterior's uncertainty and keeps the pieces few.
 SIMPLIFY_CELLS = 0.25
 
 
-def field_polygon(field: np.ndarray, grid: Grid) -> Polygon:
+def field_polygon(field: np.ndarray, grid: Grid, refinement: int = Protocol.body_refinement) -> Polygon:
     """The largest connected region inside the zero level of ``field`` (sub-cell marching
-    squares), holes kept, simplified within a quarter cell; empty if there is none."""
+    squares), holes kept, simplified within a quarter cell; empty if there is none.
+
+    With ``refinement`` k > 1 the outline is drawn on a grid k times finer, the field
+    interpolated between the nodes by the cubic spline through them (:func:`refined`):
+    marching squares interpolates linearly along each cell side, so on the belief's own
+    cells every corner of the outline is cut by up to a cell (docs/physics.md, "The
+    sample's body")."""
+    if refinement > 1:
+        field, grid = refined(field, grid, refinement)
     return simplified_outline(largest_region(inside_region(field, grid)), grid.cell)
+
+
+def refined(field: np.ndarray, grid: Grid, factor: int) -> tuple[np.ndarray, Grid]:
+    """``field`` on a grid ``factor`` times finer over the same square: the bicubic
+    interpolating spline through the nodes (scipy's FITPACK, no BLAS: the same numbers on
+    every host for the same field), continued beyond the outermost nodes by its end
+    pieces."""
+    from scipy.interpolate import RectBivariateSpline
+
+    fine = Grid(grid.size * factor, grid.extent)
+    half = 0.5 * grid.extent
+    spline = RectBivariateSpline(grid.coords, grid.coords, np.asarray(field, dtype=float).T, kx=3, ky=3, s=0,
+                                 bbox=[-half, half, -half, half])
+    return spline(fine.coords, fine.coords).T, fine
 
 
 def simplified_outline(region: Polygon, cell: float) -> Polygon:
