@@ -389,22 +389,36 @@ def _smooth_fields(grid, n, seed, scale=0.35):
     return base[None] + scale * 0.05 * noise
 
 
-def test_bodies_are_the_largest_parts_marching_squares_draws():
+@pytest.fixture(scope="module")
+def random_bodies():
+    """200 random fields with necks, saddles and islands on one grid, and the model's
+    body masks of them (harness.grasp._bodies)."""
+    from harness.grasp import _bodies
+
+    grid = Grid(40, 0.2)
+    values = _smooth_fields(grid, 200, seed=11)
+    return grid, values, _bodies(values, grid.cell)[1]
+
+
+def _nodes_in(polygon, field, grid):
+    """The field's inside nodes (a mask) and, for each of them, whether it lies in
+    ``polygon`` (its boundary included)."""
+    import shapely
+
+    inside = field < 0
+    xx, yy = np.meshgrid(grid.coords, grid.coords)
+    return inside, shapely.contains_xy(polygon.buffer(1e-9), xx[inside], yy[inside])
+
+
+def test_bodies_are_the_largest_parts_marching_squares_draws(random_bodies):
     """On 200 random fields with necks, saddles and islands, the body's inside nodes are
     exactly the inside nodes of the largest polygon of harness.geometry.inside_region
     (the outline the physics extrudes), a field is fragmented exactly when that region
     has several parts, and the body's fractional area is within 3 % of the polygon's."""
-    from shapely.geometry import MultiPoint
-
     from harness.geometry import inside_region, largest_region, polygons
 
-    grid = Grid(40, 0.2)
-    values = _smooth_fields(grid, 200, seed=11)
+    grid, values, mine = random_bodies
     regions = SDFBatch(grid, values, np.zeros(values.shape + (2,))).regions
-    from harness.grasp import _bodies
-
-    _, mine, _ = _bodies(values, grid.cell)
-    xx, yy = np.meshgrid(grid.coords, grid.coords)
     several = 0
     for k, field in enumerate(values):
         region = inside_region(field, grid)
@@ -412,33 +426,23 @@ def test_bodies_are_the_largest_parts_marching_squares_draws():
         several += len(parts) > 1
         assert regions.fragmented[k] == (len(parts) > 1), k
         body = largest_region(region)
-        inside = field < 0
-        points = MultiPoint(np.column_stack([xx[inside], yy[inside]]))
-        in_body = np.array([body.buffer(1e-9).contains(p) for p in points.geoms])
+        inside, in_body = _nodes_in(body, field, grid)
         np.testing.assert_array_equal(in_body, mine[k][inside], err_msg=f"field {k}")
         assert regions.area[k] == pytest.approx(body.area, rel=0.03), k
     assert several >= 20  # the test saw fragmented fields
 
 
-def test_the_refined_body_the_physics_extrudes_is_the_same_piece():
+def test_the_refined_body_the_physics_extrudes_is_the_same_piece(random_bodies):
     """The physics outlines a sample on cells twice as fine (harness.physics.bodies,
     the protocol's body_refinement): on the 200 random fields above, the nodes inside
     its outline and the model's body differ only at the boundary, within 0.4 of a cell's
     width of the zero level (0.37 the largest), never by a piece."""
-    from shapely.geometry import MultiPoint
-
-    from harness.grasp import _bodies
     from harness.physics.bodies import field_polygon
 
-    grid = Grid(40, 0.2)
-    values = _smooth_fields(grid, 200, seed=11)
-    _, mine, _ = _bodies(values, grid.cell)
-    xx, yy = np.meshgrid(grid.coords, grid.coords)
+    grid, values, mine = random_bodies
     worst = 0.0
     for k, field in enumerate(values):
-        inside = field < 0
-        body = field_polygon(field, grid, 2).buffer(1e-9)
-        in_body = np.array([body.contains(p) for p in MultiPoint(np.column_stack([xx[inside], yy[inside]])).geoms])
+        inside, in_body = _nodes_in(field_polygon(field, grid, 2), field, grid)
         wrong = in_body != mine[k][inside]
         if wrong.any():
             worst = max(worst, float(-field[inside][wrong].min()) / grid.cell)
