@@ -223,6 +223,27 @@ def test_the_brier_floor_is_the_expected_score_of_the_true_rates():
     assert rs.brier_floor(_posterior(np.array([1.0, 0.0]), 24, rng)) == 0.0
 
 
+def test_the_retest_spearman_is_what_a_second_run_of_the_trials_reaches():
+    """Simulated: plans with known success rates, 24 trials each; the split-half estimate
+    from one run averages, over 60 repetitions, to the Spearman between two independent
+    runs of the same plans (simulated beside it): within 0.03 where success varies much
+    (rates 0.3-1: about 0.8), within 0.06 where it barely does (0.9-1: about 0.3, far
+    below the 0.7 target; there one run's Spearman spreads by +-0.12, so the two means
+    differ by about 0.02 by chance, and halves of 12 trials are coarse)."""
+    rng = np.random.default_rng(8)
+    for low, expected_range, tolerance in ((0.3, (0.65, 0.95), 0.03), (0.9, (0.1, 0.45), 0.06)):
+        rates = rng.uniform(low, 1.0, 80)
+        estimated, actual = [], []
+        for _ in range(60):
+            first, second = _posterior(rates, 24, rng), _posterior(rates, 24, rng)
+            estimated.append(rs.retest_spearman(first, repeats=16))
+            a, b = (run.assign(s=run.outcome == "success").groupby("scene").s.mean() for run in (first, second))
+            actual.append(stats.spearmanr(a, b).statistic)
+        assert np.mean(estimated) == pytest.approx(np.mean(actual), abs=tolerance)
+        assert expected_range[0] < np.mean(actual) < expected_range[1]
+    assert math.isnan(rs.retest_spearman(_posterior(np.array([1.0, 1.0, 1.0]), 24, rng)))  # never varies
+
+
 def test_the_engine_yardstick_scores_one_run_by_the_others_rates_at_the_same_grasps():
     """The same trials in both runs: Spearman 1 and the Brier score of each plan's own rate,
     mean s (1 - s) over trials (closed form); a plan executed at another grasp in the other

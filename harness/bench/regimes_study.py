@@ -211,12 +211,12 @@ def run(out: Path = default_folder("sweep"), engines=("pybullet",), workers: int
 
 def study(out: Path, engines=("pybullet",), regimes=REGIMES, objects=None) -> dict:
     """Per engine, regime and part (design, held_out, all): the calibration of P_F and
-    P_L, each planner's success and the lift planners' paired differences; two
-    yardsticks for P_L, the Brier score's floor (:func:`brier_floor`) and, with two
-    engines, the other engine's success per plan as the estimate
-    (:func:`engine_yardstick`); per verdict of the model on each posterior trial's own
-    draw, how often the physics succeeded (:func:`verdict_rows`); and the differences
-    pooled over the sweep."""
+    P_L, each planner's success and the lift planners' paired differences; three
+    yardsticks for P_L, the Brier score's floor (:func:`brier_floor`), the Spearman the
+    trials measured again would reach (:func:`retest_spearman`) and, with two engines,
+    the other engine's success per plan as the estimate (:func:`engine_yardstick`); per
+    verdict of the model on each posterior trial's own draw, how often the physics
+    succeeded (:func:`verdict_rows`); and the differences pooled over the sweep."""
     from harness.report import load, restricted
 
     objects = objects or regime_objects()
@@ -274,6 +274,7 @@ def _regime_row(data: dict, scenes: list[str]) -> dict:
     row["success_rate"] = float((post.outcome == "success").mean()) if len(post) else math.nan
     row["budget_stops"] = int((part["plans"].status == "budget").sum())
     row["brier_floor"] = brier_floor(post)
+    row["retest_spearman"] = retest_spearman(post)
     won = part["trials"].assign(s=part["trials"].outcome == "success")
     rates = won.groupby(["shapes", "planner"], sort=False).s.mean()
     for planner in dict.fromkeys(won.planner):
@@ -324,6 +325,35 @@ def brier_floor(post: pd.DataFrame) -> float:
         return math.nan
     s = g["sum"] / g["count"]
     return float((g["count"] ** 2 / (g["count"] - 1) * s * (1 - s)).sum() / g["count"].sum())
+
+
+def retest_spearman(post: pd.DataFrame, repeats: int = 64, seed: int = 0) -> float:
+    """How well the plans' success, measured again with as many trials, would rank this
+    measurement: each plan's posterior trials split at random into two halves, the
+    Spearman over plans between the halves' success rates (averaged over ``repeats``
+    splits), stepped up to the full count by Spearman-Brown, 2 r / (1 + r). A ceiling for
+    P_L's Spearman set by the trials' own noise, as :func:`brier_floor` is a floor for its
+    Brier score: a perfect estimate of each plan's success rate ranks one measurement
+    about as well as another measurement does, or better. NaN with fewer than three
+    plans of two trials or more, or where the halves never vary."""
+    won = post.assign(s=(post.outcome == "success").to_numpy())
+    groups = [g.to_numpy() for _, g in won.groupby(["scene", "realisation", "planner"]).s if len(g) > 1]
+    if len(groups) < 3:
+        return math.nan
+    rng = np.random.default_rng(seed)
+    rhos = []
+    for _ in range(repeats):
+        halves = np.empty((len(groups), 2))
+        for k, outcomes in enumerate(groups):
+            order = rng.permutation(len(outcomes))
+            half = len(outcomes) // 2
+            halves[k] = outcomes[order[:half]].mean(), outcomes[order[half:]].mean()
+        if np.ptp(halves[:, 0]) > 0 and np.ptp(halves[:, 1]) > 0:
+            rhos.append(stats.spearmanr(halves[:, 0], halves[:, 1]).statistic)
+    if not rhos:
+        return math.nan
+    r = float(np.mean(rhos))
+    return 2.0 * r / (1.0 + r) if r > -1.0 else math.nan
 
 
 def engine_yardstick(post: pd.DataFrame, other: pd.DataFrame, plans: pd.DataFrame,
@@ -380,8 +410,8 @@ def _pooled(runs: dict, regimes, held: set) -> dict:
 
 def regime_map(rows: pd.DataFrame, path: Path) -> Path:
     """The regime map: per regime (rows), P_L's Spearman and Brier against their targets
-    and their yardsticks (the Brier floor; the other engine's success as the estimate,
-    when the sweep ran in both), and the lift planners' paired differences against
+    and their yardsticks (the Brier floor and the trials' retest Spearman; the other
+    engine's success as the estimate, when the sweep ran in both), and the lift planners' paired differences against
     mean-shape-lift, for the design and held-out parts of each engine."""
     import matplotlib
 
@@ -398,7 +428,8 @@ def regime_map(rows: pd.DataFrame, path: Path) -> Path:
             g = rows[(rows.engine == engine) & (rows.part == part)].set_index("regime").reindex(regimes)
             faded = np.where(g.varies.fillna(False).astype(bool), 1.0, 0.35)
             for ax, col, target, marks in (
-                    (axes[e, 0], "p_l_spearman", SPEARMAN_TARGET, (("engine_spearman", "|", "the other engine"),)),
+                    (axes[e, 0], "p_l_spearman", SPEARMAN_TARGET, (("engine_spearman", "|", "the other engine"),
+                                                                   ("retest_spearman", "x", "retest"))),
                     (axes[e, 1], "p_l_brier", BRIER_TARGET, (("engine_brier", "|", "the other engine"),
                                                              ("brier_floor", "x", "floor")))):
                 ax.barh(y + dy, g[col], height=0.34, color=colour, alpha=0.8, label=part.replace("_", " "))
@@ -428,8 +459,8 @@ def regime_map(rows: pd.DataFrame, path: Path) -> Path:
     axes[0, 0].legend(fontsize=7, loc="lower left")
     axes[0, 2].legend(fontsize=6, loc="lower left")
     fig.text(0.01, 0.005, "* held-out regime; faded bars: success does not vary (fewer than a tenth of the "
-             "plans below 0.9); |: the other engine's success per plan as the estimate; x: the Brier score's "
-             "floor", fontsize=7)
+             "plans below 0.9); |: the other engine's success per plan as the estimate; x: the trials measured "
+             "again (Spearman) and the Brier score's floor", fontsize=7)
     fig.tight_layout(rect=(0, 0.02, 1, 1))
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -442,10 +473,12 @@ def format_lines(res: dict) -> list[str]:
                                                  f"design, {len(res['objects']['held_out'])} held out)"]
     for engine in dict.fromkeys(r["engine"] for r in res["rows"]):
         lines.append(f"{engine}: regime, part, plans, share of plans below 0.9, P_F Spearman/Brier, "
-                     f"P_L Spearman/Brier/mean, the Brier floor, the other engine's success as the estimate "
+                     f"P_L Spearman/Brier/mean, the Brier floor, the Spearman of the trials measured again (retest), "
+                     f"the other engine's success as the estimate "
                      f"(Spearman/Brier), success, gp-gpis-opt-lift and gp-p-lift - {BASELINE_LIFT}")
         lines.append(f"{'regime':<22}{'part':<10}{'plans':>6}{'<0.9':>6}{'P_F rho':>9}{'Brier':>7}"
-                     f"{'P_L rho':>9}{'Brier':>7}{'mean':>6}{'floor':>7}{'eng rho':>8}{'Brier':>7}{'succ':>6}  "
+                     f"{'P_L rho':>9}{'Brier':>7}{'mean':>6}{'floor':>7}{'retest':>7}{'eng rho':>8}{'Brier':>7}"
+                     f"{'succ':>6}  "
                      f"{'opt-lift diff [95%]':<24}{'gp-p-lift diff [95%]':<24}")
         for r in res["rows"]:
             if r["engine"] != engine:
@@ -457,6 +490,7 @@ def format_lines(res: dict) -> list[str]:
                          f"{r.get('p_f_spearman', math.nan):>9.2f}{r.get('p_f_brier', math.nan):>7.3f}"
                          f"{r.get('p_l_spearman', math.nan):>9.2f}{r.get('p_l_brier', math.nan):>7.3f}"
                          f"{r.get('p_l_mean', math.nan):>6.2f}{r.get('brier_floor', math.nan):>7.3f}"
+                         f"{r.get('retest_spearman', math.nan):>7.2f}"
                          f"{r.get('engine_spearman', math.nan):>8.2f}{r.get('engine_brier', math.nan):>7.3f}"
                          f"{r['success_rate']:>6.2f}  {diffs}")
         for part, d in res["pooled"][engine].items():
