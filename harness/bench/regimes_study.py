@@ -411,8 +411,9 @@ def _pooled(runs: dict, regimes, held: set) -> dict:
 def regime_map(rows: pd.DataFrame, path: Path) -> Path:
     """The regime map: per regime (rows), P_L's Spearman and Brier against their targets
     and their yardsticks (the Brier floor and the trials' retest Spearman; the other
-    engine's success as the estimate, when the sweep ran in both), and the lift planners' paired differences against
-    mean-shape-lift, for the design and held-out parts of each engine."""
+    engine's success as the estimate, when the sweep ran in both), and the lift
+    planners' paired differences against mean-shape-lift, for the design and held-out
+    parts of each engine."""
     import matplotlib
 
     matplotlib.use("Agg")
