@@ -12,6 +12,7 @@ with the outcome of the posterior trial that shares it.
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -287,11 +288,45 @@ def brier_score(forecast, wins, count) -> float:
     return float(((forecast ** 2) * (count - wins) + ((1 - forecast) ** 2) * wins).sum() / count.sum())
 
 
+#: Random splits of each plan's trials that :func:`retest_spearman` averages over.
+RETEST_SPLITS = 64
+
+
+def retest_spearman(post: pd.DataFrame, repeats: int = RETEST_SPLITS, seed: int = 0) -> float:
+    """How well the plans' success, measured again with as many trials, would rank this
+    measurement: each plan's posterior trials split at random into two halves, the
+    Spearman over plans between the halves' success rates (averaged over ``repeats``
+    splits, drawn from ``seed``), stepped up to the full count by Spearman-Brown,
+    2 r / (1 + r). A ceiling for an estimate's Spearman set by the trials' own noise, as
+    the Brier score's floor is for its Brier score: a perfect estimate of each plan's
+    success rate ranks one measurement about as well as another measurement does. NaN
+    with fewer than three plans of two trials or more, or where the halves never vary."""
+    won = post.assign(s=(post.outcome == "success").to_numpy())
+    groups = [g.to_numpy() for _, g in won.groupby(["scene", "realisation", "planner"]).s if len(g) > 1]
+    if len(groups) < 3:
+        return math.nan
+    rng = np.random.default_rng(seed)
+    rhos = []
+    for _ in range(repeats):
+        halves = np.empty((len(groups), 2))
+        for k, outcomes in enumerate(groups):
+            order = rng.permutation(len(outcomes))
+            half = len(outcomes) // 2
+            halves[k] = outcomes[order[:half]].mean(), outcomes[order[half:]].mean()
+        if np.ptp(halves[:, 0]) > 0 and np.ptp(halves[:, 1]) > 0:
+            rhos.append(stats.spearmanr(halves[:, 0], halves[:, 1]).statistic)
+    if not rhos:
+        return math.nan
+    r = float(np.mean(rhos))
+    return 2.0 * r / (1.0 + r) if r > -1.0 else math.nan
+
+
 def calibration(data: dict) -> tuple[pd.DataFrame, pd.DataFrame]:
     """Per plan: analytic P_F and P_L against success on posterior samples. Returns the
     table per metric and planner (and 'all': Brier score over trials, each trial's
-    forecast its plan's estimate; Spearman over plans) and the reliability bins per
-    metric."""
+    forecast its plan's estimate; Spearman over plans; beside it the Spearman the same
+    plans' trials measured again would reach, :func:`retest_spearman`, a ceiling set by
+    the trials' noise) and the reliability bins per metric."""
     plans = data["plans"][data["plans"].executed == 1]
     post = data["trials"][data["trials"].shapes == "posterior"]
     rate = plan_rates(post).reset_index()
@@ -299,6 +334,7 @@ def calibration(data: dict) -> tuple[pd.DataFrame, pd.DataFrame]:
         rate, on=["scene", "realisation", "planner"])
     rows, bins = [], []
     edges = np.linspace(0, 1, RELIABILITY_BINS + 1)
+    retest = {}  # per planner (and 'all'), the same for every metric
     for metric in METRICS:
         known = per_plan[per_plan[metric].notna()]
         for planner, g in list(known.groupby("planner")) + [(ALL, known)]:
@@ -309,8 +345,10 @@ def calibration(data: dict) -> tuple[pd.DataFrame, pd.DataFrame]:
             success = g["sum"] / g["count"]
             varied = len(g) > 2 and forecast.nunique() > 1 and success.nunique() > 1  # else undefined
             rho = stats.spearmanr(forecast, success).statistic if varied else np.nan
+            if planner not in retest:
+                retest[planner] = retest_spearman(post if planner == ALL else post[post.planner == planner])
             rows.append({"metric": metric, "planner": planner, "plans": len(g), "brier": brier, "spearman": float(rho),
-                         "mean_estimate": float(forecast.mean()),
+                         "retest_spearman": retest[planner], "mean_estimate": float(forecast.mean()),
                          "success_rate": float(g["sum"].sum() / g["count"].sum())})
         which = np.clip(np.digitize(known[metric], edges[1:-1]), 0, RELIABILITY_BINS - 1)
         for k in range(RELIABILITY_BINS):

@@ -16,7 +16,7 @@ from scipy import stats
 
 from harness.bench import regimes_study as rs
 from harness.bench.regime_objects import FAMILIES, objects
-from harness.report import load
+from harness.report import load, retest_spearman
 from harness.scene import load_scene
 
 PLANNERS = [{"name": "mean-shape", "label": "mean-shape-lift", "params": {"quality": "lift", "candidates": 20}},
@@ -236,12 +236,33 @@ def test_the_retest_spearman_is_what_a_second_run_of_the_trials_reaches():
         estimated, actual = [], []
         for _ in range(60):
             first, second = _posterior(rates, 24, rng), _posterior(rates, 24, rng)
-            estimated.append(rs.retest_spearman(first, repeats=16))
+            estimated.append(retest_spearman(first, repeats=16))
             a, b = (run.assign(s=run.outcome == "success").groupby("scene").s.mean() for run in (first, second))
             actual.append(stats.spearmanr(a, b).statistic)
         assert np.mean(estimated) == pytest.approx(np.mean(actual), abs=tolerance)
         assert expected_range[0] < np.mean(actual) < expected_range[1]
-    assert math.isnan(rs.retest_spearman(_posterior(np.array([1.0, 1.0, 1.0]), 24, rng)))  # never varies
+    assert math.isnan(retest_spearman(_posterior(np.array([1.0, 1.0, 1.0]), 24, rng)))  # never varies
+
+
+def test_calibration_gives_each_planner_the_retest_of_its_own_trials():
+    """calibration.csv's retest_spearman: per planner the statistic of that planner's
+    trials, for 'all' of every trial, the same for P_F's and P_L's rows."""
+    from harness.report import ALL, calibration
+
+    rng = np.random.default_rng(9)
+    runs = []
+    for planner in ("a", "b"):
+        post = _posterior(rng.uniform(0.3, 1.0, 12), 24, rng).assign(planner=planner, shapes="posterior")
+        runs.append(post)
+    trials = pd.concat(runs, ignore_index=True)
+    plans = trials[["scene", "realisation", "planner"]].drop_duplicates().assign(executed=1)
+    analytic = plans.drop(columns="executed").assign(p_f=rng.random(len(plans)), p_l=rng.random(len(plans)))
+    cal, _ = calibration({"plans": plans, "analytic": analytic, "trials": trials})
+    for planner, part in (("a", runs[0]), ("b", runs[1]), (ALL, trials)):
+        rows = cal[cal.planner == planner]
+        assert len(rows) == 2 and rows.retest_spearman.nunique() == 1
+        assert rows.retest_spearman.iloc[0] == pytest.approx(retest_spearman(part), abs=1e-12)
+    assert cal.retest_spearman.iloc[0] > 0.5  # 12 plans at rates 0.3-1, 24 trials each: a measurable ranking
 
 
 def test_the_engine_yardstick_scores_one_run_by_the_others_rates_at_the_same_grasps():

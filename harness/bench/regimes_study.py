@@ -213,7 +213,7 @@ def study(out: Path, engines=("pybullet",), regimes=REGIMES, objects=None) -> di
     """Per engine, regime and part (design, held_out, all): the calibration of P_F and
     P_L, each planner's success and the lift planners' paired differences; three
     yardsticks for P_L, the Brier score's floor (:func:`brier_floor`), the Spearman the
-    trials measured again would reach (:func:`retest_spearman`) and, with two engines,
+    trials measured again would reach (:func:`harness.report.retest_spearman`) and, with two engines,
     the other engine's success per plan as the estimate (:func:`engine_yardstick`); per
     verdict of the model on each posterior trial's own draw, how often the physics
     succeeded (:func:`verdict_rows`); and the differences pooled over the sweep."""
@@ -270,11 +270,10 @@ def _regime_row(data: dict, scenes: list[str]) -> dict:
     cal = calibration(part)[0]
     for r in cal[cal.planner == ALL].itertuples():
         row.update({f"{r.metric}_spearman": r.spearman, f"{r.metric}_brier": r.brier,
-                    f"{r.metric}_mean": r.mean_estimate})
+                    f"{r.metric}_mean": r.mean_estimate, "retest_spearman": r.retest_spearman})
     row["success_rate"] = float((post.outcome == "success").mean()) if len(post) else math.nan
     row["budget_stops"] = int((part["plans"].status == "budget").sum())
     row["brier_floor"] = brier_floor(post)
-    row["retest_spearman"] = retest_spearman(post)
     won = part["trials"].assign(s=part["trials"].outcome == "success")
     rates = won.groupby(["shapes", "planner"], sort=False).s.mean()
     for planner in dict.fromkeys(won.planner):
@@ -325,35 +324,6 @@ def brier_floor(post: pd.DataFrame) -> float:
         return math.nan
     s = g["sum"] / g["count"]
     return float((g["count"] ** 2 / (g["count"] - 1) * s * (1 - s)).sum() / g["count"].sum())
-
-
-def retest_spearman(post: pd.DataFrame, repeats: int = 64, seed: int = 0) -> float:
-    """How well the plans' success, measured again with as many trials, would rank this
-    measurement: each plan's posterior trials split at random into two halves, the
-    Spearman over plans between the halves' success rates (averaged over ``repeats``
-    splits), stepped up to the full count by Spearman-Brown, 2 r / (1 + r). A ceiling for
-    P_L's Spearman set by the trials' own noise, as :func:`brier_floor` is a floor for its
-    Brier score: a perfect estimate of each plan's success rate ranks one measurement
-    about as well as another measurement does, or better. NaN with fewer than three
-    plans of two trials or more, or where the halves never vary."""
-    won = post.assign(s=(post.outcome == "success").to_numpy())
-    groups = [g.to_numpy() for _, g in won.groupby(["scene", "realisation", "planner"]).s if len(g) > 1]
-    if len(groups) < 3:
-        return math.nan
-    rng = np.random.default_rng(seed)
-    rhos = []
-    for _ in range(repeats):
-        halves = np.empty((len(groups), 2))
-        for k, outcomes in enumerate(groups):
-            order = rng.permutation(len(outcomes))
-            half = len(outcomes) // 2
-            halves[k] = outcomes[order[:half]].mean(), outcomes[order[half:]].mean()
-        if np.ptp(halves[:, 0]) > 0 and np.ptp(halves[:, 1]) > 0:
-            rhos.append(stats.spearmanr(halves[:, 0], halves[:, 1]).statistic)
-    if not rhos:
-        return math.nan
-    r = float(np.mean(rhos))
-    return 2.0 * r / (1.0 + r) if r > -1.0 else math.nan
 
 
 def engine_yardstick(post: pd.DataFrame, other: pd.DataFrame, plans: pd.DataFrame,
