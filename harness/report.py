@@ -297,10 +297,12 @@ def retest_spearman(post: pd.DataFrame, repeats: int = RETEST_SPLITS, seed: int 
     measurement: each plan's posterior trials split at random into two halves, the
     Spearman over plans between the halves' success rates (averaged over ``repeats``
     splits, drawn from ``seed``), stepped up to the full count by Spearman-Brown,
-    2 r / (1 + r). A ceiling for an estimate's Spearman set by the trials' own noise, as
-    the Brier score's floor is for its Brier score: a perfect estimate of each plan's
-    success rate ranks one measurement about as well as another measurement does. NaN
-    with fewer than three plans of two trials or more, or where the halves never vary."""
+    2 r / (1 + r). A yardstick for an estimate's Spearman set by the trials' own noise,
+    as the Brier score's floor is for its Brier score: a perfect estimate (each plan's
+    true success rate) ranks the measured rates at about the square root of it (a
+    measurement correlates with its true value as the square root of its test-retest
+    correlation; tested), so below about 0.49 no estimate can reach a Spearman of 0.7.
+    NaN with fewer than three plans of two trials or more, or where the halves never vary."""
     won = post.assign(s=(post.outcome == "success").to_numpy())
     groups = [g.to_numpy() for _, g in won.groupby(["scene", "realisation", "planner"]).s if len(g) > 1]
     if len(groups) < 3:
@@ -325,8 +327,8 @@ def calibration(data: dict) -> tuple[pd.DataFrame, pd.DataFrame]:
     """Per plan: analytic P_F and P_L against success on posterior samples. Returns the
     table per metric and planner (and 'all': Brier score over trials, each trial's
     forecast its plan's estimate; Spearman over plans; beside it the Spearman the same
-    plans' trials measured again would reach, :func:`retest_spearman`, a ceiling set by
-    the trials' noise) and the reliability bins per metric."""
+    plans' trials measured again would reach, :func:`retest_spearman`, whose square root
+    is about what a perfect estimate reaches) and the reliability bins per metric."""
     plans = data["plans"][data["plans"].executed == 1]
     post = data["trials"][data["trials"].shapes == "posterior"]
     rate = plan_rates(post).reset_index()
@@ -334,7 +336,8 @@ def calibration(data: dict) -> tuple[pd.DataFrame, pd.DataFrame]:
         rate, on=["scene", "realisation", "planner"])
     rows, bins = [], []
     edges = np.linspace(0, 1, RELIABILITY_BINS + 1)
-    retest = {}  # per planner (and 'all'), the same for every metric
+    key = ["scene", "realisation", "planner"]
+    plan_of = pd.MultiIndex.from_frame(post[key])
     for metric in METRICS:
         known = per_plan[per_plan[metric].notna()]
         for planner, g in list(known.groupby("planner")) + [(ALL, known)]:
@@ -345,10 +348,9 @@ def calibration(data: dict) -> tuple[pd.DataFrame, pd.DataFrame]:
             success = g["sum"] / g["count"]
             varied = len(g) > 2 and forecast.nunique() > 1 and success.nunique() > 1  # else undefined
             rho = stats.spearmanr(forecast, success).statistic if varied else np.nan
-            if planner not in retest:
-                retest[planner] = retest_spearman(post if planner == ALL else post[post.planner == planner])
+            retest = retest_spearman(post[plan_of.isin(pd.MultiIndex.from_frame(g[key]))])  # these plans' trials
             rows.append({"metric": metric, "planner": planner, "plans": len(g), "brier": brier, "spearman": float(rho),
-                         "retest_spearman": retest[planner], "mean_estimate": float(forecast.mean()),
+                         "retest_spearman": retest, "mean_estimate": float(forecast.mean()),
                          "success_rate": float(g["sum"].sum() / g["count"].sum())})
         which = np.clip(np.digitize(known[metric], edges[1:-1]), 0, RELIABILITY_BINS - 1)
         for k in range(RELIABILITY_BINS):

@@ -229,17 +229,21 @@ def test_the_retest_spearman_is_what_a_second_run_of_the_trials_reaches():
     runs of the same plans (simulated beside it): within 0.03 where success varies much
     (rates 0.3-1: about 0.8), within 0.06 where it barely does (0.9-1: about 0.3, far
     below the 0.7 target; there one run's Spearman spreads by +-0.12, so the two means
-    differ by about 0.02 by chance, and halves of 12 trials are coarse)."""
+    differ by about 0.02 by chance, and halves of 12 trials are coarse). The plans' true
+    rates as the estimate reach about its square root, within the same tolerances."""
     rng = np.random.default_rng(8)
     for low, expected_range, tolerance in ((0.3, (0.65, 0.95), 0.03), (0.9, (0.1, 0.45), 0.06)):
         rates = rng.uniform(low, 1.0, 80)
-        estimated, actual = [], []
+        estimated, actual, perfect = [], [], []
         for _ in range(60):
             first, second = _posterior(rates, 24, rng), _posterior(rates, 24, rng)
             estimated.append(retest_spearman(first, repeats=16))
             a, b = (run.assign(s=run.outcome == "success").groupby("scene").s.mean() for run in (first, second))
             actual.append(stats.spearmanr(a, b).statistic)
+            perfect.append(stats.spearmanr(rates, a.reindex([f"s{k}" for k in range(len(rates))])).statistic)
         assert np.mean(estimated) == pytest.approx(np.mean(actual), abs=tolerance)
+        # the true rates as the estimate reach about its square root
+        assert np.sqrt(np.mean(estimated)) == pytest.approx(np.mean(perfect), abs=tolerance)
         assert expected_range[0] < np.mean(actual) < expected_range[1]
     assert math.isnan(retest_spearman(_posterior(np.array([1.0, 1.0, 1.0]), 24, rng)))  # never varies
 
