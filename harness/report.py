@@ -338,6 +338,7 @@ def calibration(data: dict) -> tuple[pd.DataFrame, pd.DataFrame]:
     edges = np.linspace(0, 1, RELIABILITY_BINS + 1)
     key = ["scene", "realisation", "planner"]
     plan_of = pd.MultiIndex.from_frame(post[key])
+    retests = {}  # per set of plans: P_F's and P_L's rows of a planner share it
     for metric in METRICS:
         known = per_plan[per_plan[metric].notna()]
         for planner, g in list(known.groupby("planner")) + [(ALL, known)]:
@@ -348,7 +349,10 @@ def calibration(data: dict) -> tuple[pd.DataFrame, pd.DataFrame]:
             success = g["sum"] / g["count"]
             varied = len(g) > 2 and forecast.nunique() > 1 and success.nunique() > 1  # else undefined
             rho = stats.spearmanr(forecast, success).statistic if varied else np.nan
-            retest = retest_spearman(post[plan_of.isin(pd.MultiIndex.from_frame(g[key]))])  # these plans' trials
+            these = tuple(map(tuple, g[key].to_numpy()))
+            if these not in retests:  # these plans' trials
+                retests[these] = retest_spearman(post[plan_of.isin(pd.MultiIndex.from_tuples(these, names=key))])
+            retest = retests[these]
             rows.append({"metric": metric, "planner": planner, "plans": len(g), "brier": brier, "spearman": float(rho),
                          "retest_spearman": retest, "mean_estimate": float(forecast.mean()),
                          "success_rate": float(g["sum"].sum() / g["count"].sum())})

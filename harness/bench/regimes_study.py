@@ -213,10 +213,11 @@ def study(out: Path, engines=("pybullet",), regimes=REGIMES, objects=None) -> di
     """Per engine, regime and part (design, held_out, all): the calibration of P_F and
     P_L, each planner's success and the lift planners' paired differences; three
     yardsticks for P_L, the Brier score's floor (:func:`brier_floor`), the Spearman the
-    trials measured again would reach (:func:`harness.report.retest_spearman`) and, with two engines,
-    the other engine's success per plan as the estimate (:func:`engine_yardstick`); per
-    verdict of the model on each posterior trial's own draw, how often the physics
-    succeeded (:func:`verdict_rows`); and the differences pooled over the sweep."""
+    trials measured again would reach (:func:`harness.report.retest_spearman`) and,
+    with two engines, the other engine's success per plan as the estimate
+    (:func:`engine_yardstick`); per verdict of the model on each posterior trial's own
+    draw, how often the physics succeeded (:func:`verdict_rows`); and the differences
+    pooled over the sweep."""
     from harness.report import load, restricted
 
     objects = objects or regime_objects()
