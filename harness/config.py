@@ -15,7 +15,7 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 from harness.errors import InputError
-from harness.protocol import ENGINES
+from harness.protocol import ENGINES, PAD_STIFFNESS
 from harness.scene import LIBRARY, library_names, load_scene, resolve
 from harness.toml_table import Table, read_toml
 
@@ -75,7 +75,12 @@ class ExperimentConfig:
         # Recorded whether or not the config sets it: a ledger whose samples' bodies were
         # outlined on the belief's own cells (before body_refinement) is not resumed into
         # rows made with finer ones.
-        d["body_refinement"] = self.protocol().body_refinement
+        protocol = self.protocol()
+        d["body_refinement"] = protocol.body_refinement
+        # Likewise Bullet's pads (rigid before they were compliant); MuJoCo's rows do not
+        # depend on them, and its hashes stay as they were.
+        if protocol.engine == "pybullet":
+            d["pads"] = [protocol.pad_stiffness, protocol.pad_damping]
         return d
 
     @property
@@ -185,6 +190,13 @@ def parse_config(data: dict, source: str, base_dir: Path, default_name: str = "e
     engine = phys.string("engine", ENGINES[0], choices=ENGINES)
     if protocol.get("convex_clipping") and engine != "pybullet":
         raise phys.error("convex_clipping", f"Bullet's alone; the engine is '{engine}'")
+    for key in ("pad_stiffness", "pad_damping"):
+        if key in phys.data:
+            protocol[key] = phys.number(key, None, lo=0.0, hi=1e9)
+            if engine != "pybullet":
+                raise phys.error(key, f"Bullet's alone (MuJoCo's pads are soft by solref); the engine is '{engine}'")
+    if "pad_damping" in protocol and protocol["pad_damping"] <= 0.0 < protocol.get("pad_stiffness", PAD_STIFFNESS):
+        raise phys.error("pad_damping", "a compliant pad (pad_stiffness > 0) needs pad_damping > 0 N s/m")
     if engine != ENGINES[0]:  # the default engine is left out, so configs written before engines keep their hash
         protocol["engine"] = engine
     batch = phys.integer("batch_size", 16, lo=1, hi=64)

@@ -280,6 +280,10 @@ BAD_CONFIGS = [
     ('[physics]\nbody_refinement = 0\n[[planners]]\nname = "gp-p"', "physics.body_refinement"),
     ('[physics]\nbody_refinement = 2.5\n[[planners]]\nname = "gp-p"', "physics.body_refinement"),
     ('[physics]\nengine = "mujoco"\nconvex_clipping = true\n[[planners]]\nname = "gp-p"', "physics.convex_clipping"),
+    ('[physics]\nengine = "mujoco"\npad_stiffness = 2e4\npad_damping = 90\n[[planners]]\nname = "gp-p"',
+     "physics.pad_stiffness"),
+    ('[physics]\npad_stiffness = -1.0\n[[planners]]\nname = "gp-p"', "physics.pad_stiffness"),
+    ('[physics]\npad_stiffness = 2e4\npad_damping = 0\n[[planners]]\nname = "gp-p"', "physics.pad_damping"),
     ('colour = "red"\n[[planners]]\nname = "gp-p"', "colour"),
     ('[[planners]]\nname = "gp-p"\n[[planners]]\nname = "gp-p"', "planners[1].label"),
     ('[gripper]\nopening = 0\n[[planners]]\nname = "gp-p"', "gripper.opening"),
@@ -412,6 +416,16 @@ def test_physics_overrides_reach_the_protocol(tmp_path):
     flipped = str(not Protocol().convex_clipping).lower()
     path = _write(tmp_path, head + f'[physics]\nconvex_clipping = {flipped}\n[[planners]]\nname = "gp-p"', "sat.toml")
     assert load_config(path).protocol().convex_clipping is not Protocol().convex_clipping
+    rigid = _write(tmp_path, head + '[physics]\npad_stiffness = 0\n[[planners]]\nname = "gp-p"', "rigid.toml")
+    assert (load_config(rigid).protocol().pad_stiffness, Protocol().pad_stiffness) == (0.0, 2e4)
+    soft = _write(tmp_path, head + '[physics]\npad_stiffness = 1e4\npad_damping = 60\n[[planners]]\nname = "gp-p"',
+                  "soft.toml")
+    assert (load_config(soft).protocol().pad_stiffness, load_config(soft).protocol().pad_damping) == (1e4, 60.0)
+    # the pads are in the hash though the config does not name them (rows made with rigid
+    # pads are never resumed into a ledger of compliant ones), in Bullet's runs alone
+    plain = load_config(_write(tmp_path, head + '[[planners]]\nname = "gp-p"', "plain.toml"))
+    assert plain.content()["pads"] == [2e4, 90.0] and load_config(rigid).hash != plain.hash
+    assert "pads" not in plain.with_engine("mujoco").content()
     path = _write(tmp_path, head + '[physics]\nbody_refinement = 1\n[[planners]]\nname = "gp-p"', "coarse.toml")
     assert (Protocol().body_refinement, load_config(path).protocol().body_refinement) == (2, 1)
     # the default refinement is in the hash though the config does not name it, so rows

@@ -265,9 +265,10 @@ def test_a_light_object_is_classed_by_its_mass_against_a_jaws_mass_read_from_the
 
 def test_a_light_thin_bar_is_held_at_the_finer_step_bullets_solver_needs(monkeypatch):
     """The 3.5 g thin bar (300 kg/m^3, 0.07 of a plate's mass): at the design's step
-    Bullet's plates press into it and close past it (`no_contact`, the control: the rule
-    switched off); the runner runs it LIGHT_REFINE times finer, where it is held, as
-    MuJoCo holds it at its own step (docs/physics.md, "Light objects")."""
+    Bullet's rigid plates press into it and close past it (`no_contact`, the control: the
+    rule switched off, rigid pads); the runner runs it LIGHT_REFINE times finer, where it
+    is held, as MuJoCo holds it at its own step (docs/physics.md, "Light objects").
+    Compliant pads (the default) hold it at the design's step too."""
     from harness.physics import bullet
 
     trials = _light_bar_trials(300.0)
@@ -276,8 +277,10 @@ def test_a_light_thin_bar_is_held_at_the_finer_step_bullets_solver_needs(monkeyp
     with make_runner(Protocol.of("mujoco")) as runner:
         assert [r.outcome for r in runner.run(trials)] == ["success"] * 2
     monkeypatch.setattr(bullet, "LIGHT_FRACTION", 0.0)
-    with make_runner(Protocol()) as runner:
+    with make_runner(Protocol(pad_stiffness=0.0)) as runner:
         assert [r.outcome for r in runner.run(trials)] == ["no_contact"] * 2
+    with make_runner(Protocol()) as runner:
+        assert [r.outcome for r in runner.run(trials)] == ["success"] * 2
 
 
 def test_a_batchs_light_objects_run_apart_without_changing_the_others():
@@ -298,3 +301,31 @@ def test_a_batchs_light_objects_run_apart_without_changing_the_others():
     assert repr(mixed[0].as_dict()) == repr(without[0].as_dict())
     assert repr(mixed[2].as_dict()) == repr(without[2].as_dict())
     assert mixed[1].outcome == light_alone[0].outcome == "success"
+
+
+def test_a_compliant_pad_sinks_as_a_linear_spring():
+    """`pad_stiffness` makes each contact point of Bullet's pads a spring (and damper):
+    a 3 cm bar gripped across its centre then closes the jaws further than rigid
+    contacts do, by the force over the stiffness. A linear spring sinks four times as far
+    under four times the force and a quarter as far four times as stiff (within 15 %);
+    on the bar's flat face the plate meets it as two points would, F / (2 k) a plate
+    (within 20 %: 0.5 mm at 20 N and 2e4 N/m, as MuJoCo's pad sinks, tested there);
+    rigid contacts sink less than 0.1 mm."""
+    from harness.bench.lift_study import Bar, _exact_draws
+
+    def sink(force: float, stiffness: float) -> float:
+        bar = Bar(0.12, 1000.0, 0.5, force)
+        scene = bar.scene()
+        settings, approach, _ = _exact_draws(scene, 1, 0, "pad sink")
+        trial = make_trials(settings, bar.grasp(0.0), [truth_polygon(scene)], np.zeros_like(approach))[0]
+        protocol = Protocol(pad_stiffness=stiffness, pad_damping=2.0 * math.sqrt(stiffness * 0.1) if stiffness else 0.0)
+        with make_runner(protocol) as runner:
+            result = runner.run([trial])[0]
+        assert result.outcome == "success"
+        return 0.5 * (bar.width - result.grip_width)
+
+    assert sink(20.0, 0.0) < 1e-4
+    base = sink(20.0, 2e4)
+    assert base == pytest.approx(20.0 / (2 * 2e4), rel=0.2)
+    assert sink(5.0, 2e4) == pytest.approx(base / 4, rel=0.15)
+    assert sink(20.0, 8e4) == pytest.approx(base / 4, rel=0.15)

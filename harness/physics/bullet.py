@@ -166,6 +166,9 @@ class _Slot(TrialMachine):
         for link in range(-1, pb.getNumJoints(self.grip, physicsClientId=c)):
             pb.changeDynamics(self.grip, link, lateralFriction=t.friction, frictionAnchor=int(p.friction_anchor),
                               physicsClientId=c)
+            if p.pad_stiffness > 0.0:  # a compliant pad: each contact point a spring and damper
+                pb.changeDynamics(self.grip, link, contactStiffness=p.pad_stiffness, contactDamping=p.pad_damping,
+                                  physicsClientId=c)
             pb.setCollisionFilterPair(self.grip, self.runner.table, link, -1, 0, physicsClientId=c)
             if self.foot is not None:
                 pb.setCollisionFilterPair(self.obj, self.grip, self.foot, link, 0, physicsClientId=c)
