@@ -329,3 +329,32 @@ def test_a_compliant_pad_sinks_as_a_linear_spring():
     assert base == pytest.approx(20.0 / (2 * 2e4), rel=0.2)
     assert sink(5.0, 2e4) == pytest.approx(base / 4, rel=0.15)
     assert sink(20.0, 8e4) == pytest.approx(base / 4, rel=0.15)
+
+
+def test_compliant_pads_turn_a_bar_where_a_uniformly_pressed_pad_does():
+    """A bar gripped across its faces at offset d from its centre of mass turns once its
+    weight's torque m g d passes the plates' torsional friction 2 mu F r, r the mean
+    distance from the patch's centre under a uniform pressure (the 1 cm x (h - 1 mm)
+    patch, integrated here on a grid): d* = 40.4 mm for the 18 x 3 x 3 cm bar of 162 g at
+    8 N and mu 0.5. With compliant pads (the default) Bullet turns (more than 0.3 rad) at
+    most one of 8 trials at 0.8 d* and at least 7 of 8 at 1.2 d* (docs/physics.md, "A
+    compliant pad in Bullet"); rigid pads, whose point contacts give short levers, turn
+    at least half of them already at 0.8 d*."""
+    from harness.bench.lift_study import Bar, _exact_draws
+
+    bar = Bar(0.18, 1000.0, 0.5, 8.0)
+    w, h = 0.01, bar.thickness - 0.001
+    x, z = np.meshgrid(np.linspace(-w / 2, w / 2, 201), np.linspace(-h / 2, h / 2, 401))
+    d_star = 2 * bar.friction * bar.force * float(np.hypot(x, z).mean()) / (bar.mass * 9.81)
+    assert d_star == pytest.approx(0.0404, abs=5e-4)
+    scene = bar.scene()
+    settings, approach, _ = _exact_draws(scene, 8, 0, "pad onset")
+
+    def turned(factor: float, protocol: Protocol) -> int:
+        trials = make_trials(settings, bar.grasp(factor * d_star), [truth_polygon(scene)], approach)
+        with make_runner(protocol) as runner:
+            return sum(r.pivot > 0.3 for r in runner.run(trials))
+
+    assert turned(0.8, Protocol()) <= 1
+    assert turned(1.2, Protocol()) >= 7
+    assert turned(0.8, Protocol(pad_stiffness=0.0)) >= 4
