@@ -163,12 +163,11 @@ class _Slot(TrialMachine):
         orientation = pb.getQuaternionFromEuler([0, 0, heading])
         self.grip = pb.loadURDF(g.urdf, [centre[0], centre[1], base_z], orientation, physicsClientId=c,
                                 flags=pb.URDF_INITIALIZE_SAT_FEATURES if p.convex_clipping else 0)
+        # A compliant pad: each contact point of the gripper a spring and a damper.
+        pad = {"contactStiffness": p.pad_stiffness, "contactDamping": p.pad_damping} if p.pad_stiffness > 0 else {}
         for link in range(-1, pb.getNumJoints(self.grip, physicsClientId=c)):
             pb.changeDynamics(self.grip, link, lateralFriction=t.friction, frictionAnchor=int(p.friction_anchor),
-                              physicsClientId=c)
-            if p.pad_stiffness > 0.0:  # a compliant pad: each contact point a spring and damper
-                pb.changeDynamics(self.grip, link, contactStiffness=p.pad_stiffness, contactDamping=p.pad_damping,
-                                  physicsClientId=c)
+                              physicsClientId=c, **pad)
             pb.setCollisionFilterPair(self.grip, self.runner.table, link, -1, 0, physicsClientId=c)
             if self.foot is not None:
                 pb.setCollisionFilterPair(self.obj, self.grip, self.foot, link, 0, physicsClientId=c)
