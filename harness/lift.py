@@ -2,10 +2,10 @@
 weight once lifted, per shape draw, with that draw's mass and centre of mass
 (docs/lift.md).
 
-Once lifted, each plate must carry half the weight (times the lift's peak load factor)
-by friction along the wall, and together they must resist the weight's torque about the
-grasp axis, W d (d: the centre of mass's distance from the line through the contacts),
-by torsional friction over their contact patches. Each plate's patch is a soft-finger
+Once lifted, each plate must carry half the weight by friction along the wall, and
+together they must resist the weight's torque about the grasp axis, W d (d: the centre
+of mass's distance from the line through the contacts), by torsional friction over
+their contact patches. Each plate's patch is a soft-finger
 contact with an elliptic limit surface (Howe and Cutkosky 1996),
 
     (f_t / (mu N))^2 + (tau / (kappa mu N))^2 <= 1,
@@ -19,16 +19,22 @@ is admissible. The model takes kappa uniform on that range, one draw per plate a
 draw (the draws' ``pressure`` deviates); docs/lift.md shows that Bullet's contact
 manifolds spread over the same range.
 
-A torque beyond the plates' resistance turns the object about the grasp axis until it
-hangs below the jaws. It is still lifted if, hanging, it clears the table: its extent
-beyond the grasp axis on the side of its centre of mass is less than the lift height
-plus the height of the axis above the table. Otherwise the turn puts it back on the
-table (``weight_torque``). A weight beyond the plates' friction slides it out
-(``weight_slip``). A plate that presses the wall with its edge (a wall inclined to the
-plate: harness.grasp.edge_contacts) does not let the object turn and hang: as the
-object turns, the wall's distance from the plate's edge varies along the edge, the
-pressure goes to one end of it, and the object swings on two points and is lost
-(``edge_turn``; docs/lift.md, "Edge contacts").
+A torque beyond the plates' resistance turns the object about the grasp axis until the
+weight's lever has shortened to what they resist, W d cos(theta) = resistance, where
+the plates' friction stops it (as Bullet's compliant pads stop bars: docs/lift.md,
+"Bars"). It is still lifted if, turned that far, it clears the table: its extent
+beyond the grasp axis on the side of its centre of mass, turned down by theta, stays
+above the lifted table. Otherwise the turn puts it back on the table
+(``weight_torque``). A weight beyond the plates' friction slides it out
+(``weight_slip``). The lift's acceleration raises the load for a tenth of a second;
+friction stops the brief turn it starts on a plate's patch (bars turned 0.04-0.15 rad
+and held), so the turn and the slide are judged under the weight alone. A plate that
+presses the wall with its edge (a wall inclined to the plate:
+harness.grasp.edge_contacts) does not let the object turn and hang: as the object
+turns, the wall's distance from the plate's edge varies along the edge, the pressure
+goes to one end of it, and the object swings on two points and is lost (``edge_turn``;
+docs/lift.md, "Edge contacts"); nothing stops a turn there once started, so with an
+edge contact the turn is judged under the lift's peak load (the load factor).
 """
 
 from __future__ import annotations
@@ -37,7 +43,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.special import ndtr
 
 from harness.settings import GRAVITY, GraspSettings
 
@@ -66,6 +71,20 @@ def clearance(settings: GraspSettings) -> float:
     return settings.lift_height + axis_height(settings)
 
 
+def clear_cosine(reach, settings: GraspSettings) -> np.ndarray:
+    """cos(theta_c) (B,) of the largest turn theta_c about the grasp axis at which the
+    lifted object still clears the table, 0 where it clears it hanging straight down.
+    Turned by theta, the object's lowest point (its ``reach`` beyond the axis, on its
+    bottom face, the axis a height z_a above that face) lies reach sin(theta) + z_a
+    cos(theta) below the axis, which is z_a + the lift height above the table."""
+    za, lift = axis_height(settings), settings.lift_height
+    reach = np.asarray(reach, dtype=float)
+    radius = np.hypot(reach, za)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        theta = np.arcsin(np.clip((za + lift) / radius, -1.0, 1.0)) - np.arctan2(za, reach)
+    return np.where(reach <= za + lift, 0.0, np.cos(theta))
+
+
 def weight_of(area, settings: GraspSettings) -> np.ndarray:
     """The weight (N) of a prism of this cross-section area (m^2), the settings' thickness
     and density."""
@@ -78,13 +97,13 @@ def largest_lever(width, height: float) -> np.ndarray:
     return np.hypot(0.5 * np.asarray(width, dtype=float), 0.5 * height)
 
 
-def torque_demand(weight, distance, friction, settings: GraspSettings) -> np.ndarray:
+def torque_demand(weight, distance, friction, settings: GraspSettings, load_factor: float = 1.0) -> np.ndarray:
     """The weight's torque about the grasp axis in units of the plates' friction lever
     capacity: T = W_l d / (mu N sqrt(1 - (W_l / (2 mu N))^2)), with W_l the weight times
-    the load factor. The plates hold when kappa_1 + kappa_2 >= T; NaN where the weight
-    alone slides the object out."""
+    ``load_factor`` (1: the weight alone; the lift's peak: settings.load_factor). The
+    plates hold when kappa_1 + kappa_2 >= T; NaN where the load slides the object out."""
     capacity = np.asarray(friction, dtype=float) * settings.force
-    load = settings.load_factor * np.asarray(weight, dtype=float)
+    load = load_factor * np.asarray(weight, dtype=float)
     with np.errstate(invalid="ignore", divide="ignore"):
         share = load / (2.0 * capacity)
         return np.where(share <= 1.0, load * np.asarray(distance) / (capacity * np.sqrt(1.0 - share**2)), np.nan)
@@ -111,8 +130,11 @@ class LiftVerdict:
     lift averaged over the levers instead of drawn (smooth; its mean over draws estimates
     P_L with less variance than the verdicts' share); and the quantities the verdict was
     made of: the weight (N), the centre of mass's distance from the contact line (m), the
-    torque demand T (m; NaN where the weight slides the object out), the drawn lever sum
-    kappa_1 + kappa_2 and its largest value (m), and whether a plate presses with its edge."""
+    torque demand T under the weight alone (m; NaN where the weight slides the object
+    out) and under the lift's peak load (``peak_demand``, which judges edge contacts), the
+    drawn lever sum kappa_1 + kappa_2 and its largest value (m), whether a plate presses
+    with its edge, and cos of the largest turn at which the object clears the table
+    (:func:`clear_cosine`)."""
 
     lifted: np.ndarray
     reason: np.ndarray
@@ -124,6 +146,8 @@ class LiftVerdict:
     lever: np.ndarray
     largest_lever: np.ndarray
     edge: np.ndarray
+    peak_demand: np.ndarray
+    clear_cos: np.ndarray
 
 
 def judge(c1, c2, w1, w2, area, com, reach, friction, pressure, settings: GraspSettings, edge=None) -> LiftVerdict:
@@ -135,25 +159,32 @@ def judge(c1, c2, w1, w2, area, com, reach, friction, pressure, settings: GraspS
     friction (B,): the draw's coefficient; pressure (B, 2): uniform deviates in [0, 1)
     placing each plate's lever in its admissible range; edge (B,): whether either plate
     presses the wall with its edge (harness.grasp.edge_contacts; default none): a turned
-    object is then not lifted, whatever its hang (``edge_turn``).
+    object is then not lifted, whatever its hang (``edge_turn``), and the turn is judged
+    under the lift's peak load.
+
+    The weight's demand T (:func:`torque_demand`, the weight alone) against the drawn
+    lever sum K: where T > K the object turns until T cos(theta) = K and is lifted if at
+    that angle it clears the table, K >= T cos(theta_c) (:func:`clear_cosine`).
     """
     weight = weight_of(area, settings)
     edge = np.zeros(len(weight), dtype=bool) if edge is None else np.asarray(edge, dtype=bool)
     distance = line_distance(com, c1, c2)
     demand = torque_demand(weight, distance, friction, settings)
+    peak = torque_demand(weight, distance, friction, settings, settings.load_factor)
     height = patch_height(settings)
     largest = largest_lever(w1, height), largest_lever(w2, height)
     lever = pressure[:, 0] * largest[0] + pressure[:, 1] * largest[1]
     slip = np.isnan(demand)
-    pivots = ~slip & (demand > lever)
-    hangs_clear = reach < clearance(settings)
+    pivots = ~slip & np.where(edge, np.isnan(peak) | (peak > lever), demand > lever)
+    stop = clear_cosine(reach, settings)
+    hangs_clear = lever >= demand * stop
     reason = np.full(len(weight), -1, dtype=np.int8)
     reason[slip] = SLIP
     reason[pivots & ~hangs_clear] = TORQUE
     reason[pivots & hangs_clear & edge] = EDGE_TURN
-    hold = hold_probability(demand, *largest)
-    return LiftVerdict(reason < 0, reason, pivots, np.where(slip, 0.0, np.where(hangs_clear & ~edge, 1.0, hold)),
-                       weight, distance, demand, lever, largest[0] + largest[1], edge)
+    chance = np.where(edge, hold_probability(peak, *largest), hold_probability(demand * stop, *largest))
+    return LiftVerdict(reason < 0, reason, pivots, np.where(slip, 0.0, chance),
+                       weight, distance, demand, lever, largest[0] + largest[1], edge, peak, stop)
 
 
 def line_distance(point, c1, c2) -> np.ndarray:
@@ -175,21 +206,27 @@ def side_normal(point, c1, c2) -> np.ndarray:
 
 def smooth_lift(distance, distance_sd, weight, friction, w1, w2, reach, reach_scale, settings: GraspSettings,
                 edge=None):
-    """A smooth lift probability for surrogates: the hold probability averaged over a
-    Gaussian centre-of-mass distance (mean ``distance``, std ``distance_sd``; 3-point
-    Gauss-Hermite), and, where the plates do not hold, the probability that the object
-    hangs clear, Phi((clearance - reach) / reach_scale), unless a plate presses with its
-    edge (``edge``, (B,) bool: the turned object is lost, as in :func:`judge`)."""
+    """A smooth lift probability for surrogates, :func:`judge`'s chance averaged over a
+    Gaussian centre-of-mass distance (mean ``distance``, std ``distance_sd``) and a
+    Gaussian reach (mean ``reach``, std ``reach_scale``), each by 3-point Gauss-Hermite:
+    the chance that the uniform levers stop the turn where the object clears the table,
+    or, where a plate presses with its edge (``edge``, (B,) bool), that they hold it
+    level under the lift's peak load."""
     height = patch_height(settings)
     l1, l2 = largest_lever(w1, height), largest_lever(w2, height)
     nodes, weights = (-math.sqrt(3.0), 0.0, math.sqrt(3.0)), (1 / 6, 2 / 3, 1 / 6)
-    hold = sum(w * hold_probability(torque_demand(weight, np.abs(distance + z * distance_sd), friction, settings),
-                                    l1, l2) for z, w in zip(nodes, weights))
-    clear = ndtr((clearance(settings) - reach) / reach_scale)
-    if edge is not None:
-        clear = np.where(edge, 0.0, clear)
+    edge = np.zeros(np.shape(distance), dtype=bool) if edge is None else np.asarray(edge, dtype=bool)
+    stops = [(w, clear_cosine(np.asarray(reach, dtype=float) + z * reach_scale, settings))
+             for z, w in zip(nodes, weights)]
+    chance = 0.0
+    for z, w in zip(nodes, weights):
+        d = np.abs(distance + z * distance_sd)
+        static = torque_demand(weight, d, friction, settings)
+        level = hold_probability(torque_demand(weight, d, friction, settings, settings.load_factor), l1, l2)
+        turned = sum(v * hold_probability(static * stop, l1, l2) for v, stop in stops)
+        chance = chance + w * np.where(edge, level, turned)
     slides = np.isnan(torque_demand(weight, 0.0, friction, settings))
-    return np.where(slides, 0.0, hold + (1.0 - hold) * clear)
+    return np.where(slides, 0.0, chance)
 
 
 @dataclass(frozen=True)

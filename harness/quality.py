@@ -230,15 +230,18 @@ class DrawOutcomes:
 
 #: The lift model's quantities per draw that ``evaluate_draws(..., lift_inputs=True)``
 #: returns (harness.lift): the weight (N), the centre of mass's distance from the line
-#: through the contacts (m), the torque demand T (m, in units of the plates' friction
-#: lever), the lever sum the draw's pressure deviates give (m) and its largest value (the
-#: two half-diagonals, m), the reach beyond the contact line on the centre of mass's side
-#: (m), the hang's gap to the lifted table (clearance - reach, m: positive hangs clear),
-#: the friction coefficient, each plate's share of its friction carried as force,
-#: u = lambda W / (2 mu N), and whether a plate presses its wall with its edge (1 or 0;
-#: harness.grasp.edge_contacts).
+#: through the contacts (m), the torque demand T under the weight alone (m, in units of
+#: the plates' friction lever), the lever sum the draw's pressure deviates give (m) and
+#: its largest value (the two half-diagonals, m), the reach beyond the contact line on the
+#: centre of mass's side (m), the hang's gap to the lifted table (clearance - reach, m:
+#: positive hangs clear straight down), the friction coefficient, each plate's share of
+#: its friction carried as force at the lift's peak, u = lambda W / (2 mu N), whether a
+#: plate presses its wall with its edge (1 or 0; harness.grasp.edge_contacts), the torque
+#: demand under the lift's peak load (which judges edge contacts), and cos of the largest
+#: turn at which the object clears the table (harness.lift.clear_cosine: lifted where the
+#: lever sum >= demand x clear_cos).
 LIFT_INPUTS = ("weight", "distance", "demand", "lever_sum", "largest_lever_sum", "reach", "hang_gap", "friction",
-               "load_share", "edge")
+               "load_share", "edge", "peak_demand", "clear_cos")
 
 
 def evaluate_draws(grasps, draws: EvaluationDraws, settings: GraspSettings, lift: bool = True,
@@ -351,7 +354,7 @@ def _lift_inputs(verdict, reach, friction, settings: GraspSettings) -> dict:
             "lever_sum": verdict.lever, "largest_lever_sum": verdict.largest_lever, "reach": reach,
             "hang_gap": clearance(settings) - reach, "friction": friction,
             "load_share": settings.load_factor * verdict.weight / (2.0 * friction * settings.force),
-            "edge": verdict.edge.astype(float)}
+            "edge": verdict.edge.astype(float), "peak_demand": verdict.peak_demand, "clear_cos": verdict.clear_cos}
 
 
 def _on_bodies(g1, g2, field, draws: EvaluationDraws, contacts: Contacts, closure, gamma, settings: GraspSettings):

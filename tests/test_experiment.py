@@ -460,9 +460,11 @@ def test_report_draws_sets_each_posterior_trial_beside_its_own_draws_lift_model(
     """`report --draws`: one row per posterior trial, its outcome the ledger's, its
     verdict the one the ledger recorded during the run, and the lift model's quantities
     on that draw consistent with the verdict by the model's own rules (docs/lift.md):
-    a lifted draw is level exactly when its lever sum reaches the demand, and turned and
-    still lifted only when its hang clears the table (positive gap); the weight is the
-    prism's (density x thickness x g x the sample's area, about the rectangle's)."""
+    a lifted draw is level exactly when its lever sum reaches the demand (the lift's peak
+    demand where a plate presses with its edge), and turned and still lifted only where
+    its levers stop the turn short of the table (lever sum >= demand x clear_cos) and no
+    plate presses with its edge; the weight is the prism's (density x thickness x g x the
+    sample's area, about the rectangle's)."""
     from harness.report import load
     from harness.scene import load_scene
     from harness.settings import GRAVITY
@@ -480,8 +482,10 @@ def test_report_draws_sets_each_posterior_trial_beside_its_own_draws_lift_model(
     assert all(r.verdict == recorded[(r.scene, r.realisation, r.planner)][r.trial] for r in table.itertuples())
     lifted = table[table.verdict.isin(["lifted", "lifted_turned"])]
     assert len(lifted) > 0
-    assert ((lifted.lever_sum >= lifted.demand) == (lifted.verdict == "lifted")).all()
-    assert (lifted[lifted.verdict == "lifted_turned"].hang_gap > 0).all()
+    needed = np.where(lifted.edge > 0, lifted.peak_demand, lifted.demand)
+    assert ((lifted.lever_sum >= needed) == (lifted.verdict == "lifted")).all()
+    turned = lifted[lifted.verdict == "lifted_turned"]
+    assert (turned.lever_sum >= turned.demand * turned.clear_cos).all() and (turned.edge == 0).all()
     scene = load_scene("rectangle")
     prism = scene.physics.density * scene.physics.thickness * GRAVITY * scene.shape.area
     assert lifted.weight.median() == pytest.approx(prism, rel=0.05)

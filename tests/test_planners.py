@@ -41,8 +41,9 @@ def test_built_in_planners_pass_the_conformance_kit(cls, params):
 
 def test_planning_for_the_lift_keeps_the_heavy_stapler_up_where_force_closure_does_not():
     """Stapler, realisation 1 (1.5 g/cm^3, 45 % friction): the force-closure grasps hold it
-    far from its centre of mass, where the weight turns it back onto the table; the lift
-    variants grasp it nearer the centre of mass. P_L on 1000 shared evaluation draws."""
+    far from its centre of mass, where the weight turns it, on most draws back onto the
+    table; the lift variants grasp it nearer the centre of mass. P_L on 1000 shared
+    evaluation draws."""
     scene = load_scene("stapler")
     belief = build_belief(scene, stream(0, "stapler", 1, "sensor")).prepare()
     problem = Problem.for_belief(belief)
@@ -52,11 +53,12 @@ def test_planning_for_the_lift_keeps_the_heavy_stapler_up_where_force_closure_do
         for quality in ("force_closure", "lift"):
             plan = cls(quality=quality).plan(problem, stream(0, "stapler", 1, cls.name, quality))
             p_l[cls.name, quality] = estimate_p_f(plan.grasp, draws, problem.settings)[0].p_l
-    # Measured (2026-11-25, the lift judged on each sample's body): 0.998 and 0.999 for the
-    # lift variants, 0.017 and 0.078 for force closure (0.004 and 0.007 when the lift was
-    # judged on every piece of a sample: 23 % of these samples are in several pieces).
+    # Measured (2026-11-28, the turn stopped where friction holds it): 0.983 and 0.975 for
+    # the lift variants, 0.297 and 0.284 for force closure (0.017 and 0.078 when every
+    # turned draw was taken to hang straight down; make eval's trials of such plans in
+    # Bullet succeed 0.63-0.68, docs/lift.md).
     assert p_l["gp-p", "lift"] >= 0.9 and p_l["gp-gpis-opt", "lift"] >= 0.9
-    assert p_l["gp-p", "force_closure"] <= 0.1 and p_l["gp-gpis-opt", "force_closure"] <= 0.1
+    assert p_l["gp-p", "force_closure"] <= 0.4 and p_l["gp-gpis-opt", "force_closure"] <= 0.4
 
 
 def test_gp_gpis_opt_lift_picks_the_optimum_p_l_ranks_first_among_its_finalists():
