@@ -212,8 +212,9 @@ class Contacts:
     contact: patch1, patch2 (B, K, 2) hold where each of the K lines meets it (NaN for a
     line that does not touch, and where there is no contact), and w1, w2 (B,) the
     patch's extent along the outline (0 for a point or curved contact, up to the plate's
-    width for a flat face; NaN where there is no contact). edge1, edge2 (B,) say whether
-    the plate presses the wall with its edge (:func:`edge_contacts`)."""
+    width for a flat face; NaN where there is no contact). edge1, edge2 (B,) are the slopes
+    at which the wall recedes from a plate that presses it with its edge, 0 where the
+    plate does not (:func:`edge_contacts`, :func:`edge_slopes`)."""
 
     c1: np.ndarray
     c2: np.ndarray
@@ -245,9 +246,16 @@ def edge_contacts(depth: np.ndarray, first: np.ndarray) -> np.ndarray:
     contact's line. The slope at the edge is that of the quadratic through the outer line
     and its two inward neighbours (of the line beside it alone when the next misses), so
     that a curved wall whose closest approach lies on the plate has none."""
+    return edge_slopes(depth, first, 1.0) > 0
+
+
+def edge_slopes(depth: np.ndarray, first: np.ndarray, spacing: float) -> np.ndarray:
+    """The slope (B,: metres per metre across the plate) at which the wall recedes from a
+    plate that presses it with its edge (:func:`edge_contacts`), 0 where the plate does
+    not; ``spacing`` (m) is the distance between plate lines."""
     b, k = depth.shape
     if k < 3:
-        return np.zeros(b, dtype=bool)
+        return np.zeros(b)
     rows = np.arange(b)
     outer = (first == 0) | (first == k - 1)
     step = np.where(first == 0, 1, -1)
@@ -257,7 +265,8 @@ def edge_contacts(depth: np.ndarray, first: np.ndarray) -> np.ndarray:
         far = depth[rows, np.clip(first + 2 * step, 0, k - 1)] - base
         # Per plate line: the one-sided slope at the edge of the quadratic through (0, 0), (1, near), (2, far).
         slope = np.where(np.isfinite(far), 2.0 * near - 0.5 * far, near)
-        return outer & np.isfinite(near) & (slope * (k - 1) > PATCH_DEPTH)
+        edge = outer & np.isfinite(near) & (slope * (k - 1) > PATCH_DEPTH)
+        return np.where(edge, slope / spacing, 0.0)
 
 
 def find_contacts(fields: SDFBatch, g1, g2, jaw_width: float, field_index=None,
@@ -282,7 +291,7 @@ def find_contacts(fields: SDFBatch, g1, g2, jaw_width: float, field_index=None,
     field_index = np.broadcast_to(np.asarray(field_index, dtype=np.int64), (b,))
     out = Contacts(*(np.full((b, 2), np.nan) for _ in range(4)), np.empty(b, dtype=np.int8),
                    np.full(b, np.nan), np.full(b, np.nan), *(np.full((b, plate_lines, 2), np.nan) for _ in range(2)),
-                   np.zeros(b, dtype=bool), np.zeros(b, dtype=bool))
+                   np.zeros(b), np.zeros(b))
     steps = march_steps(np.linalg.norm(g2 - g1, axis=1), fields.grid.cell)
     chunk = max(1, _MAX_EVALUATIONS // (plate_lines * int(steps.max(initial=2))))
     for start in range(0, b, chunk):
@@ -381,7 +390,7 @@ def _contacts_chunk(fields: SDFBatch, g1, g2, jaw_width, fidx, plate_lines, step
         with np.errstate(invalid="ignore"):
             beyond = sense * (t - t[rows, best][:, None]) * length[:, None]  # the wall's distance beyond the first line
         beyond = np.where(np.isfinite(t), beyond, np.inf)
-        edges.append(edge_contacts(beyond, best) & (status == OK))
+        edges.append(np.where(status == OK, edge_slopes(beyond, best, spacing), 0.0))
         slopes.append(_line_slope(beyond))
     # Walls parallel to each other within PATCH_DEPTH over the plate's width, however
     # inclined to the plates, are turned flush with both by the closing plates (the
@@ -391,7 +400,8 @@ def _contacts_chunk(fields: SDFBatch, g1, g2, jaw_width, fidx, plate_lines, step
     with np.errstate(invalid="ignore"):
         wedge = np.abs(slopes[0] + slopes[1]) * (plate_lines - 1) > PATCH_DEPTH
     n1, n2 = normal[:b], normal[b:]
-    return Contacts(point[:b], point[b:], n1, n2, status, *widths, *patches, edges[0] & wedge, edges[1] & wedge)
+    return Contacts(point[:b], point[b:], n1, n2, status, *widths, *patches, np.where(wedge, edges[0], 0.0),
+                    np.where(wedge, edges[1], 0.0))
 
 
 def _line_slope(depth: np.ndarray) -> np.ndarray:

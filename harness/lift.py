@@ -30,11 +30,16 @@ above the lifted table. Otherwise the turn puts it back on the table
 friction stops the brief turn it starts on a plate's patch (bars turned 0.04-0.15 rad
 and held), so the turn and the slide are judged under the weight alone. A plate that
 presses the wall with its edge (a wall inclined to the plate:
-harness.grasp.edge_contacts) does not let the object turn and hang: as the object
-turns, the wall's distance from the plate's edge varies along the edge, the pressure
-goes to one end of it, and the object swings on two points and is lost (``edge_turn``;
-docs/lift.md, "Edge contacts"); nothing stops a turn there once started, so with an
-edge contact the turn is judged under the lift's peak load (the load factor).
+harness.grasp.edge_contacts) holds the object as a patch only while the turn is small:
+as the object turns, the wall's distance from the plate's edge varies along the edge, by
+s (h / 2) sin(theta) at its ends for a wall receding at slope s, and once that passes the
+pad's compression delta one end lets go, the pressure goes to the other, and the object
+swings on two points and is lost (``edge_turn``; docs/lift.md, "Edge contacts"). So an
+edge-pressed object is lifted only if the turn stops before sin(theta_r) = delta / (s h / 2)
+(:func:`release_cosine`), judged under the weight alone as every turn is: nothing stops a
+turn past theta_r. delta = F / PAD_STIFFNESS, the pad's compression under the grip force.
+(Before 2026-11-28 an edge contact lost every turned object, judged at the lift's peak:
+the rigid pad's limit, delta = 0.)
 """
 
 from __future__ import annotations
@@ -51,6 +56,13 @@ LIFT_REASONS = ("weight_slip", "weight_torque", "edge_turn")
 SLIP, TORQUE, EDGE_TURN = 0, 1, 2
 #: The jaw plates end this far above the table (harness.physics.gripper.TABLE_CLEARANCE).
 PLATE_CLEARANCE = 0.001
+#: A jaw pad's stiffness (N/m) over a plate's patch: about 2 mm of silicone rubber (E about
+#: 1 MPa) over 0.8 cm^2, E A / t about 4e4 N/m, the pad both engines model (Bullet's
+#: compliant pad and MuJoCo's soft contacts sink 0.2-0.6 mm at 20 N; docs/physics.md, "A
+#: compliant pad in Bullet"). A plate pressed by F sinks F / PAD_STIFFNESS (0.5 mm at
+#: 20 N); an edge concentrates the force and sinks further, so this is the smaller
+#: compression and the earlier release.
+PAD_STIFFNESS = 4.0e4
 
 
 def patch_height(settings: GraspSettings) -> float:
@@ -83,6 +95,22 @@ def clear_cosine(reach, settings: GraspSettings) -> np.ndarray:
     with np.errstate(invalid="ignore", divide="ignore"):
         theta = np.arcsin(np.clip((za + lift) / radius, -1.0, 1.0)) - np.arctan2(za, reach)
     return np.where(reach <= za + lift, 0.0, np.cos(theta))
+
+
+def release_cosine(slope, settings: GraspSettings) -> np.ndarray:
+    """cos(theta_r) (B,) of the turn about the grasp axis at which a plate pressing its wall
+    with its edge lets go of one end of the edge. The wall recedes from the edge across
+    the plate at ``slope`` (dimensionless; 0 where the plate does not press with its
+    edge) and the grasp axis passes through the edge, so turned by theta the wall lies
+    slope (h / 2) sin(theta) beyond the edge's ends (h the patch height): the pad,
+    pressed in by delta = F / PAD_STIFFNESS, lets go where that reaches delta,
+    sin(theta_r) = delta / (slope h / 2). 0 where the plate does not press with its edge
+    or no turn releases it."""
+    slope = np.asarray(slope, dtype=float)
+    delta = settings.force / PAD_STIFFNESS
+    with np.errstate(invalid="ignore", divide="ignore"):
+        sine = delta / (slope * 0.5 * patch_height(settings))
+        return np.where((slope > 0) & (sine < 1.0), np.sqrt(np.maximum(1.0 - sine**2, 0.0)), 0.0)
 
 
 def weight_of(area, settings: GraspSettings) -> np.ndarray:
@@ -131,10 +159,11 @@ class LiftVerdict:
     P_L with less variance than the verdicts' share); and the quantities the verdict was
     made of: the weight (N), the centre of mass's distance from the contact line (m), the
     torque demand T under the weight alone (m; NaN where the weight slides the object
-    out) and under the lift's peak load (``peak_demand``, which judges edge contacts), the
+    out) and under the lift's peak load (``peak_demand``: for analysis; no verdict uses it), the
     drawn lever sum kappa_1 + kappa_2 and its largest value (m), whether a plate presses
-    with its edge, and cos of the largest turn at which the object clears the table
-    (:func:`clear_cosine`)."""
+    with its edge, cos of the largest turn at which the object clears the table
+    (:func:`clear_cosine`) and cos of the turn at which an edge-pressed plate lets go of
+    one end (:func:`release_cosine`; 0 without an edge)."""
 
     lifted: np.ndarray
     reason: np.ndarray
@@ -148,6 +177,15 @@ class LiftVerdict:
     edge: np.ndarray
     peak_demand: np.ndarray
     clear_cos: np.ndarray
+    release_cos: np.ndarray
+
+
+def needed_lever(demand, stop, release) -> np.ndarray:
+    """The lever sum a draw needs to be lifted: the turn the weight starts must stop
+    (T cos(theta) = kappa_1 + kappa_2) where the object clears the table, T cos(theta_c),
+    and, on an edge, before the plate lets go of one end, T cos(theta_r): T max(stop,
+    release) (``release`` 0 without an edge). NaN where the weight slides the object out."""
+    return np.asarray(demand, dtype=float) * np.maximum(stop, release)
 
 
 def judge(c1, c2, w1, w2, area, com, reach, friction, pressure, settings: GraspSettings, edge=None) -> LiftVerdict:
@@ -157,17 +195,19 @@ def judge(c1, c2, w1, w2, area, com, reach, friction, pressure, settings: GraspS
     area (B,) and com (B, 2): the draw's region area (m^2) and centre of mass;
     reach (B,): the region's extent beyond the line c1-c2 on its centre of mass's side;
     friction (B,): the draw's coefficient; pressure (B, 2): uniform deviates in [0, 1)
-    placing each plate's lever in its admissible range; edge (B,): whether either plate
-    presses the wall with its edge (harness.grasp.edge_contacts; default none): a turned
-    object is then not lifted, whatever its hang (``edge_turn``), and the turn is judged
-    under the lift's peak load.
+    placing each plate's lever in its admissible range; edge (B,): the slope at which the
+    wall recedes from a plate pressing it with its edge, the larger of the two plates'
+    (harness.grasp.Contacts.edge1/edge2; 0 or default: no edge contact).
 
     The weight's demand T (:func:`torque_demand`, the weight alone) against the drawn
     lever sum K: where T > K the object turns until T cos(theta) = K and is lifted if at
-    that angle it clears the table, K >= T cos(theta_c) (:func:`clear_cosine`).
+    that angle it clears the table, K >= T cos(theta_c) (:func:`clear_cosine`); on an edge
+    it must also stop before the plate lets go of one end, K >= T cos(theta_r)
+    (:func:`release_cosine`), else it swings out (``edge_turn``).
     """
     weight = weight_of(area, settings)
-    edge = np.zeros(len(weight), dtype=bool) if edge is None else np.asarray(edge, dtype=bool)
+    slope = np.zeros(len(weight)) if edge is None else np.asarray(edge, dtype=float)
+    edge = slope > 0
     distance = line_distance(com, c1, c2)
     demand = torque_demand(weight, distance, friction, settings)
     peak = torque_demand(weight, distance, friction, settings, settings.load_factor)
@@ -175,16 +215,18 @@ def judge(c1, c2, w1, w2, area, com, reach, friction, pressure, settings: GraspS
     largest = largest_lever(w1, height), largest_lever(w2, height)
     lever = pressure[:, 0] * largest[0] + pressure[:, 1] * largest[1]
     slip = np.isnan(demand)
-    pivots = ~slip & np.where(edge, np.isnan(peak) | (peak > lever), demand > lever)
+    pivots = ~slip & (demand > lever)
     stop = clear_cosine(reach, settings)
+    release = release_cosine(slope, settings)
     hangs_clear = lever >= demand * stop
+    lifted = ~slip & (lever >= needed_lever(demand, stop, release))
     reason = np.full(len(weight), -1, dtype=np.int8)
     reason[slip] = SLIP
-    reason[pivots & ~hangs_clear] = TORQUE
-    reason[pivots & hangs_clear & edge] = EDGE_TURN
-    chance = np.where(edge, hold_probability(peak, *largest), hold_probability(demand * stop, *largest))
-    return LiftVerdict(reason < 0, reason, pivots, np.where(slip, 0.0, chance),
-                       weight, distance, demand, lever, largest[0] + largest[1], edge, peak, stop)
+    reason[~slip & ~hangs_clear] = TORQUE
+    reason[~slip & hangs_clear & ~lifted] = EDGE_TURN
+    chance = hold_probability(needed_lever(demand, stop, release), *largest)
+    return LiftVerdict(lifted, reason, pivots, np.where(slip, 0.0, chance),
+                       weight, distance, demand, lever, largest[0] + largest[1], edge, peak, stop, release)
 
 
 def line_distance(point, c1, c2) -> np.ndarray:
@@ -209,22 +251,21 @@ def smooth_lift(distance, distance_sd, weight, friction, w1, w2, reach, reach_sc
     """A smooth lift probability for surrogates, :func:`judge`'s chance averaged over a
     Gaussian centre-of-mass distance (mean ``distance``, std ``distance_sd``) and a
     Gaussian reach (mean ``reach``, std ``reach_scale``), each by 3-point Gauss-Hermite:
-    the chance that the uniform levers stop the turn where the object clears the table,
-    or, where a plate presses with its edge (``edge``, (B,) bool), that they hold it
-    level under the lift's peak load."""
+    the chance that the uniform levers stop the turn where the object clears the table
+    and, where a plate presses with its edge (``edge``, (B,) the wall's slope there, 0
+    for none), before the plate lets go of one end."""
     height = patch_height(settings)
     l1, l2 = largest_lever(w1, height), largest_lever(w2, height)
     nodes, weights = (-math.sqrt(3.0), 0.0, math.sqrt(3.0)), (1 / 6, 2 / 3, 1 / 6)
-    edge = np.zeros(np.shape(distance), dtype=bool) if edge is None else np.asarray(edge, dtype=bool)
+    release = release_cosine(np.zeros(np.shape(distance)) if edge is None else edge, settings)
     stops = [(w, clear_cosine(np.asarray(reach, dtype=float) + z * reach_scale, settings))
              for z, w in zip(nodes, weights)]
     chance = 0.0
     for z, w in zip(nodes, weights):
         d = np.abs(distance + z * distance_sd)
         static = torque_demand(weight, d, friction, settings)
-        level = hold_probability(torque_demand(weight, d, friction, settings, settings.load_factor), l1, l2)
-        turned = sum(v * hold_probability(static * stop, l1, l2) for v, stop in stops)
-        chance = chance + w * np.where(edge, level, turned)
+        chance = chance + w * sum(v * hold_probability(needed_lever(static, stop, release), l1, l2)
+                                  for v, stop in stops)
     slides = np.isnan(torque_demand(weight, 0.0, friction, settings))
     return np.where(slides, 0.0, chance)
 
@@ -264,7 +305,7 @@ class MassBelief:
     def margin(self, c1, c2, w1, w2, friction, settings: GraspSettings, reach_scale: float,
                edge=None) -> np.ndarray:
         """The smooth lift probability (B,) of grasps with contacts c1, c2 (B, 2), patch
-        widths w1, w2 (B,) and edge contacts ``edge`` (B,: either plate; default none):
+        widths w1, w2 (B,) and edge slopes ``edge`` (B,: the larger plate's; default none):
         :func:`smooth_lift` with the centre of mass's distance from the contact line, its
         std across the line (from the covariance), and the hull's reach beyond the line on
         the centre of mass's side."""
@@ -282,5 +323,5 @@ class MassBelief:
         bool), 0 on the others."""
         out = np.zeros(len(rows))
         out[rows] = self.margin(settled.c1[rows], settled.c2[rows], settled.w1[rows], settled.w2[rows], friction,
-                                settings, reach_scale, (settled.edge1 | settled.edge2)[rows])
+                                settings, reach_scale, np.maximum(settled.edge1, settled.edge2)[rows])
         return out

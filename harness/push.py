@@ -150,7 +150,7 @@ def push(fields: SDFBatch, g1, g2, field_index, contacts: Contacts, friction, ja
         done = other <= TOUCH
         pick = np.where(first[:, None], current.c1, current.c2)
         normal_out = np.where(first[:, None], current.n1, current.n2)
-        edge = np.where(first, current.edge1, current.edge2)
+        edge = np.where(first, current.edge1, current.edge2) > 0
         direction = np.where(first[:, None], u[rows], -u[rows])
         point, still = _flush_point(current, first, direction, com[rows])
         point = np.where(np.isnan(point[:, :1]), pick, point)
@@ -229,7 +229,7 @@ def _flush_point(contacts: Contacts, first, direction, com):
     flush segment (B,: the object then goes straight)."""
     patch = np.where(first[:, None, None], contacts.patch1, contacts.patch2)
     width = np.where(first, contacts.w1, contacts.w2)
-    edge = np.where(first, contacts.edge1, contacts.edge2)
+    edge = np.where(first, contacts.edge1, contacts.edge2) > 0
     touching = np.isfinite(patch[:, :, 0])
     flush = (width > 0) & (touching.sum(axis=1) > 1) & ~edge
     across = np.column_stack([-direction[:, 1], direction[:, 0]])

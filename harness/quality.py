@@ -237,11 +237,12 @@ class DrawOutcomes:
 #: positive hangs clear straight down), the friction coefficient, each plate's share of
 #: its friction carried as force at the lift's peak, u = lambda W / (2 mu N), whether a
 #: plate presses its wall with its edge (1 or 0; harness.grasp.edge_contacts), the torque
-#: demand under the lift's peak load (which judges edge contacts), and cos of the largest
-#: turn at which the object clears the table (harness.lift.clear_cosine: lifted where the
-#: lever sum >= demand x clear_cos).
+#: demand under the lift's peak load (for analysis), cos of the largest turn at which the
+#: object clears the table (harness.lift.clear_cosine) and cos of the turn at which an
+#: edge-pressed plate lets go of one end (harness.lift.release_cosine; 0 without an
+#: edge): lifted where the lever sum >= demand x max(clear_cos, release_cos).
 LIFT_INPUTS = ("weight", "distance", "demand", "lever_sum", "largest_lever_sum", "reach", "hang_gap", "friction",
-               "load_share", "edge", "peak_demand", "clear_cos")
+               "load_share", "edge", "peak_demand", "clear_cos", "release_cos")
 
 
 def evaluate_draws(grasps, draws: EvaluationDraws, settings: GraspSettings, lift: bool = True,
@@ -327,7 +328,7 @@ def _judge(g1, g2, field, draws: EvaluationDraws, settings: GraspSettings, lift:
         c1, c2, com = settled.c1[held], settled.c2[held], regions.center_of_mass[f]
         reach = regions.extent(f, c1, side_normal(com, c1, c2))
         verdict = judge(c1, c2, settled.w1[held], settled.w2[held], regions.area[f], com, reach, gamma[held],
-                        draws.pressure[f], settings, settled.edge1[held] | settled.edge2[held])
+                        draws.pressure[f], settings, np.maximum(settled.edge1[held], settled.edge2[held]))
         lifted[held], pivots[held], chance[held] = verdict.lifted, verdict.pivots, verdict.chance
         reason[np.flatnonzero(held)[~verdict.lifted]] = len(PLANAR_REASONS) + verdict.reason[~verdict.lifted]
     inputs = None
@@ -354,7 +355,8 @@ def _lift_inputs(verdict, reach, friction, settings: GraspSettings) -> dict:
             "lever_sum": verdict.lever, "largest_lever_sum": verdict.largest_lever, "reach": reach,
             "hang_gap": clearance(settings) - reach, "friction": friction,
             "load_share": settings.load_factor * verdict.weight / (2.0 * friction * settings.force),
-            "edge": verdict.edge.astype(float), "peak_demand": verdict.peak_demand, "clear_cos": verdict.clear_cos}
+            "edge": verdict.edge.astype(float), "peak_demand": verdict.peak_demand, "clear_cos": verdict.clear_cos,
+            "release_cos": verdict.release_cos}
 
 
 def _on_bodies(g1, g2, field, draws: EvaluationDraws, contacts: Contacts, closure, gamma, settings: GraspSettings):

@@ -259,7 +259,7 @@ class SurrogateObjective:
 
     def _evaluate(self, x):
         """Contacts of every sigma point: c1, c2, n1, n2 (R, 9, 2), ok (R, 9), the patch
-        widths w1, w2 (R, 9) and whether either plate presses with its edge (R, 9)."""
+        widths w1, w2 (R, 9) and the larger edge slope of the two plates (R, 9; 0: no edge)."""
         jaws = self.jaw_starts(x)
         g1, g2 = jaws[:, 0], jaws[:, 1]
         d = g2 - g1
@@ -272,7 +272,7 @@ class SurrogateObjective:
         settled = None if self.mass is None else self._squeezed(s1, s2, c).reshape(r, -1)
         return (c.c1.reshape(r, -1, 2), c.c2.reshape(r, -1, 2), c.n1.reshape(r, -1, 2), c.n2.reshape(r, -1, 2),
                 (c.status == OK).reshape(r, -1), c.w1.reshape(r, -1), c.w2.reshape(r, -1),
-                (c.edge1 | c.edge2).reshape(r, -1), settled)
+                np.maximum(c.edge1, c.edge2).reshape(r, -1), settled)
 
     def _squeezed(self, s1, s2, c):
         """The lift's smooth probability (B,) at the contacts where the plates' squeeze

@@ -547,6 +547,10 @@ def test_plates_press_a_wedge_with_their_edges_and_parallel_walls_with_their_fac
     c = find_contacts(field, [-0.04 * u], [0.04 * u], JAW)
     assert c.status[0] == OK
     assert (bool(c.edge1[0]), bool(c.edge2[0])) == expected
+    # An edge contact carries its wall's slope (the lift's release: harness.lift), exact
+    # on a straight wall to the interpolation's error.
+    for edge, slope, pressed in zip((c.edge1[0], c.edge2[0]), slopes, expected):
+        assert edge == (pytest.approx(slope, rel=0.05) if pressed else 0.0)
 
 
 @pytest.mark.parametrize("offset, expected", [(0.0, False), (0.003, False), (0.008, True)])

@@ -167,54 +167,77 @@ def test_a_turned_object_stops_where_its_weights_lever_has_shortened_to_the_plat
     assert verdict.clear_cos[2] == 0.0
 
 
-def test_the_lifts_peak_load_turns_an_object_only_where_a_plate_presses_with_its_edge():
-    """A draw whose levers hold the weight alone but not the lift's peak load (1.37 times
-    it, for a tenth of a second): on flat patches friction stops the brief turn, the
-    object is lifted level; with a plate on its edge nothing stops it (edge_turn)."""
+def test_an_edge_pressed_plate_lets_go_where_the_turned_wall_leaves_the_pads_compression():
+    """release_cosine against a second formulation: the wall, receding at slope s from the
+    plate's edge (the grasp axis through the edge), rotated about the axis in 3D, point by
+    point; the turn at which the wall lies the pad's compression F / PAD_STIFFNESS beyond
+    the edge's upper end, found by root finding."""
+    from scipy.optimize import brentq
+
+    from harness.lift import PAD_STIFFNESS, patch_height, release_cosine
+
+    settings = resolve(load_scene("rectangle"))
+    half, delta = 0.5 * patch_height(settings), settings.force / PAD_STIFFNESS
+
+    def gap(theta, s):
+        # The plate is the plane x = 0, its edge the z axis, the grasp axis the x axis. The
+        # wall's points are (s y, y, z), y >= 0. Turned by theta about the x axis, the wall
+        # point that lies under the edge's upper end (0, half) solves R (y, z) = (0, half);
+        # its x is its distance beyond the plate.
+        rotation = np.array([[math.cos(theta), -math.sin(theta)], [math.sin(theta), math.cos(theta)]])
+        y, _ = np.linalg.solve(rotation, [0.0, half])
+        return s * y - delta
+
+    for s in (0.03, 0.1, 0.3, 1.0):
+        theta = brentq(gap, 0.0, 0.5 * math.pi, args=(s,)) if gap(0.5 * math.pi, s) > 0 else None
+        expected = 0.0 if theta is None else math.cos(theta)
+        assert release_cosine(np.array([s]), settings)[0] == pytest.approx(expected, abs=1e-9)
+    assert release_cosine(np.array([0.0]), settings)[0] == 0.0  # no edge, nothing to let go
+    # A stiffer grip presses the pad further in: a later release.
+    firm = replace(settings, force=2 * settings.force)
+    assert release_cosine(np.array([0.1]), firm)[0] < release_cosine(np.array([0.1]), settings)[0]
+
+
+def test_a_turning_object_pressed_by_a_plates_edge_is_lifted_only_if_it_stops_before_the_plate_lets_go():
+    """Draws the weight turns (levers 0.9 and 0.99 of the weight's demand: stops at 0.45
+    and 0.14 rad, both hanging clear of the table): without an edge both are lifted; on an
+    edge that lets go at 0.2 rad the first is lost (edge_turn), the second lifted; on a
+    steep edge (letting go at once, the rigid pad's limit) both are lost, and a draw held
+    level by its levers is lifted whatever the edge. The smooth chance is the hold
+    probability of the lever the release needs."""
+    from harness.lift import PAD_STIFFNESS, patch_height
+
     scene = load_scene("rectangle")
     settings = resolve(scene, {"density": 3000.0})
-    c1, c2 = np.array([[0.0, -0.015]] * 2), np.array([[0.0, 0.015]] * 2)
-    com = np.array([[0.03, 0.0]] * 2)
-    args = (c1, c2, np.full(2, 0.01), np.full(2, 0.01), np.full(2, RECTANGLE_AREA), com, np.full(2, 0.05),
-            np.full(2, 0.5))
-    probe = judge(*args, np.full((2, 2), 0.5), settings)
-    # Levers between the two demands.
-    middle = 0.5 * (probe.demand[0] + probe.peak_demand[0]) / probe.largest_lever[0]
-    assert probe.demand[0] < probe.peak_demand[0]
-    plain = judge(*args, np.full((2, 2), middle), settings)
-    edged = judge(*args, np.full((2, 2), middle), settings, edge=np.array([False, True]))
-    assert not plain.pivots.any() and plain.lifted.all()
-    assert edged.pivots.tolist() == [False, True]
-    assert edged.lifted.tolist() == [True, False]
-    assert LIFT_REASONS[edged.reason[1]] == "edge_turn"
-
-
-def test_a_turning_object_pressed_by_a_plates_edge_is_not_lifted_however_clear_its_hang():
-    """The same draws as above with a plate pressing its wall with its edge: turned, the
-    object is lost whatever its hang (edge_turn, and the smooth chance falls to the hold
-    probability); held level by its levers, it is lifted as before."""
-    scene = load_scene("rectangle")
-    settings = resolve(scene)
-    clear = settings.lift_height + axis_height(settings)
-    c1, c2 = np.array([[0.0, -0.015]] * 3), np.array([[0.0, 0.015]] * 3)
-    com = np.array([[0.03, 0.0], [0.03, 0.0], [1e-4, 0.0]])
-    reach = np.array([clear - 1e-4, clear + 1e-4, clear - 1e-4])
-    pressure = np.array([[0.0, 0.0], [0.0, 0.0], [1.0, 1.0]])
-    args = (c1, c2, np.full(3, 0.01), np.full(3, 0.01), np.full(3, RECTANGLE_AREA), com, reach, np.full(3, 0.5),
-            pressure, settings)
-    plain, edged = judge(*args), judge(*args, edge=np.ones(3, dtype=bool))
-    assert plain.pivots.tolist() == edged.pivots.tolist() == [True, True, False]
-    assert plain.lifted.tolist() == [True, False, True]
-    assert edged.lifted.tolist() == [False, False, True]
-    assert [LIFT_REASONS[r] if r >= 0 else None for r in edged.reason] == ["edge_turn", "weight_torque", None]
-    assert edged.edge.all() and not plain.edge.any()
-    # The turn an edge contact starts is not stopped: judged under the lift's peak load.
-    np.testing.assert_allclose(edged.peak_demand, plain.demand * settings.load_factor
-                               * np.sqrt(1 - (plain.weight / (2 * 0.5 * settings.force)) ** 2)
-                               / np.sqrt(1 - (settings.load_factor * plain.weight / (2 * 0.5 * settings.force)) ** 2))
-    hold = hold_probability(edged.peak_demand, plain.largest_lever / 2, plain.largest_lever / 2)
+    n = 3
+    c1, c2 = np.array([[0.0, -0.015]] * n), np.array([[0.0, 0.015]] * n)
+    com = np.array([[0.03, 0.0]] * n)
+    reach = np.full(n, 0.05)  # hangs clear straight down
+    args = (c1, c2, np.full(n, 0.01), np.full(n, 0.01), np.full(n, RECTANGLE_AREA), com, reach, np.full(n, 0.5))
+    probe = judge(*args, np.full((n, 2), 0.5), settings)
+    assert (probe.clear_cos == 0).all()
+    share = np.array([0.9, 0.99, 1.5])  # lever sum over the weight's demand
+    pressure = np.repeat((share * probe.demand / probe.largest_lever)[:, None], 2, axis=1)
+    assert (pressure <= 1).all()
+    plain = judge(*args, pressure, settings)
+    assert plain.pivots.tolist() == [True, True, False] and plain.lifted.all()
+    delta, half = settings.force / PAD_STIFFNESS, 0.5 * patch_height(settings)
+    gentle = delta / (half * math.sin(0.2))  # lets go at 0.2 rad
+    edged = judge(*args, pressure, settings, edge=np.full(n, gentle))
+    np.testing.assert_allclose(edged.release_cos, math.cos(0.2))
+    assert edged.lifted.tolist() == [False, True, True] and edged.edge.all() and not plain.edge.any()
+    assert LIFT_REASONS[edged.reason[0]] == "edge_turn"
+    steep = judge(*args, pressure, settings, edge=np.full(n, 1e3))
+    assert steep.lifted.tolist() == [False, False, True]
+    assert [LIFT_REASONS[r] if r >= 0 else None for r in steep.reason] == ["edge_turn", "edge_turn", None]
+    hold = hold_probability(probe.demand * math.cos(0.2), plain.largest_lever / 2, plain.largest_lever / 2)
     np.testing.assert_allclose(edged.chance, hold)
-    assert plain.chance[0] == 1.0
+    np.testing.assert_allclose(plain.chance, 1.0)
+    # An edge on a draw that does not hang clear: the table, not the release, decides.
+    low = judge(c1, c2, np.full(n, 0.01), np.full(n, 0.01), np.full(n, RECTANGLE_AREA), com, np.full(n, 2.0),
+                np.full(n, 0.5), pressure, settings, np.full(n, gentle))
+    assert (np.arccos(low.clear_cos) < 0.1).all()
+    assert [LIFT_REASONS[r] if r >= 0 else None for r in low.reason] == ["weight_torque", "weight_torque", None]
 
 
 def _stopped_and_clear(weight, distance, reach, lever_1, lever_2, settings, n=400_000) -> float:
@@ -351,7 +374,7 @@ def test_a_lifted_draw_is_in_force_closure_or_squeezed_into_it_and_the_reasons_p
 
 def test_the_smooth_lift_is_the_average_of_the_draws_verdicts():
     """smooth_lift for a Gaussian centre-of-mass distance against Monte Carlo of judge with
-    uniform levers: the turn's stop short of the table, and the peak load on an edge."""
+    uniform levers: the turn's stop short of the table, and the release of an edge."""
     scene = load_scene("rectangle")
     settings = resolve(scene)
     rng = np.random.default_rng(9)
@@ -364,8 +387,8 @@ def test_the_smooth_lift_is_the_average_of_the_draws_verdicts():
     com = np.column_stack([distance, np.zeros(n)])
     pressure = rng.random((n, 2))
     # A reach of 1 m clears the table only nearly level; one of 20 cm where the turn must stop
-    # within 0.54 rad; a plate on its edge (the lift's peak load, no stop).
-    for far, edge in ((1.0, False), (0.2, False), (0.2, True)):
+    # within 0.54 rad; a plate on its edge that lets go sooner (slope 0.05) or at once (5).
+    for far, edge in ((1.0, 0.0), (0.2, 0.0), (0.2, 0.05), (0.2, 5.0)):
         verdict = judge(c1, c2, np.zeros(n), np.zeros(n), np.full(n, area), com, np.full(n, far),
                         np.full(n, settings.friction), pressure, settings, np.full(n, edge))
         smooth = smooth_lift(mean_d, sd, weight, settings.friction, 0.0, 0.0, far, 1e-6, settings,
