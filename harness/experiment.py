@@ -8,13 +8,13 @@ from __future__ import annotations
 import json
 import sqlite3
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from harness.config import ExperimentConfig
 from harness.errors import InputError
 from harness.manifest import environment
-from harness.tasks import batches_of, run_batch, run_cell
+from harness.tasks import batches_of, run_batch, run_cell, settings_of
 
 
 @dataclass
@@ -79,6 +79,35 @@ def run_experiment(config: ExperimentConfig, out_dir: Path, workers: int | None 
     for error in stats.errors:
         log(f"task failed: {error}")
     return stats
+
+
+def adopt_plans(config: ExperimentConfig, out_dir: Path, source: ExperimentConfig, source_dir: Path) -> int:
+    """Record in ``out_dir``'s ledger, under ``config``'s hash, the plans and their analytic
+    rows that ``source_dir``'s ledger holds for ``source``, the same experiment in another
+    engine; a run of ``config`` then resumes with them planned and simulates their trials
+    only. A plan does not depend on the engine: planners never simulate, the analytic draws
+    come from the seed alone, and each scene's grasp settings (the lift's protocol
+    included) are checked to be the same in both, so these are the plans ``config`` would
+    make (``bench engines`` finds make eval's 180 plans identical when each engine plans
+    them). Rows already recorded stay; an adopted plan's ``plan_time_s`` is the source
+    run's. Returns how many plans were new to ``out_dir``'s ledger. ValueError when the
+    experiments differ in anything but the engine."""
+    from harness.ledger import FILENAME, Ledger
+
+    if replace(source.with_engine(config.engine), name=config.name) != config:
+        raise ValueError(f"{source.name} and {config.name} differ in more than the engine")
+    for path in config.scenes:
+        if settings_of(config, path) != settings_of(source, path):
+            raise ValueError(f"{path}: the grasp settings differ between the engines' protocols")
+    with Ledger(Path(source_dir) / FILENAME, create=False) as ledger:
+        plans, analytic = ledger.rows(source.hash, "plans"), ledger.rows(source.hash, "analytic")
+    if not plans:
+        return 0
+    Path(out_dir).mkdir(parents=True, exist_ok=True)
+    with Ledger(Path(out_dir) / FILENAME) as ledger:
+        known = {(r["scene"], r["realisation"], r["planner"]) for r in ledger.rows(config.hash, "plans")}
+        ledger.add(config.hash, {"plans": plans, "analytic": analytic})
+    return sum((r["scene"], r["realisation"], r["planner"]) not in known for r in plans)
 
 
 def _check_planners(ledger, config: ExperimentConfig, out_dir: Path) -> None:

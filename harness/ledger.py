@@ -237,6 +237,13 @@ class Ledger:
         return pd.read_sql_query(f"SELECT {columns} FROM {table} WHERE config_hash = ?", self.db,
                                  params=(config_hash,))
 
+    def rows(self, config_hash: str, table: str) -> list[dict]:
+        """A table's rows under a config hash as stored (Python values, NULL as None),
+        ready for :meth:`add`."""
+        columns = _COLUMNS[table]
+        cur = self.db.execute(f"SELECT {', '.join(columns)} FROM {table} WHERE config_hash = ?", (config_hash,))
+        return [dict(zip(columns, row)) for row in cur]
+
     def done_trials(self, config_hash: str, scene: str, realisation: int) -> set[tuple[str, str, int]]:
         rows = self.db.execute("SELECT planner, shapes, trial FROM trials WHERE config_hash = ? AND scene = ? "
                                "AND realisation = ?", (config_hash, scene, realisation))

@@ -288,3 +288,35 @@ def test_the_engine_yardstick_scores_one_run_by_the_others_rates_at_the_same_gra
         float((s_rest * (1 - s_rest)).mean()), abs=1e-12)
     assert rs.engine_yardstick(rest, rest, plans, plans)["engine_brier"] == pytest.approx(
         float((s_rest * (1 - s_rest)).mean()), abs=1e-12)
+
+
+def test_a_second_engine_adopts_the_first_engines_plans(sweep, tmp_path):
+    """MuJoCo's run of a regime adopts the plans pybullet made of it (no plan made again)
+    and gives the rows of a MuJoCo run that planned for itself: every plan, analytic row
+    and trial the same. Experiments that differ in more than the engine are refused."""
+    from harness.config import parse_config
+    from harness.experiment import adopt_plans
+
+    out, _ = sweep
+    weak, lines = REGIMES[1], []
+    kwargs = dict(regimes=(weak,), objects=OBJECTS, planners=PLANNERS, posterior_trials=6, truth_trials=2,
+                  analytic_draws=60)
+    rs.run(out, engines=("pybullet", "mujoco"), workers=1, log=lines.append, **kwargs)
+    assert any("plans of the pybullet run adopted" in line for line in lines)
+    assert any(line.startswith(f"mujoco {weak.name}: 0 plans and ") for line in lines)  # nothing planned again
+    rs.run(tmp_path, engines=("mujoco",), workers=1, log=lambda line: None, **kwargs)
+    adopted, own = load(out / "mujoco" / weak.name), load(tmp_path / "mujoco" / weak.name)
+    keys = ["scene", "realisation", "planner"]
+    for table, drop in (("plans", ["plan_time_s", "trace"]), ("analytic", []),
+                        ("trials", [])):
+        a, b = (d[table].drop(columns=drop).sort_values(keys + (["shapes", "trial"] if table == "trials" else []))
+                .reset_index(drop=True) for d in (adopted, own))
+        assert len(a) > 0
+        pd.testing.assert_frame_equal(a, b, check_exact=True)
+    scenes = rs.write_objects(out, (weak,), OBJECTS)[weak.objects_key]
+    doc = rs.regime_config(weak, scenes, "mujoco", PLANNERS, 6, 2, 60)
+    config = parse_config(doc, source="test", base_dir=out, default_name=doc["name"])
+    other = parse_config({**rs.regime_config(weak, scenes, "pybullet", PLANNERS, 6, 2, 60), "seed": 1},
+                         source="test", base_dir=out, default_name=doc["name"])
+    with pytest.raises(ValueError, match="more than the engine"):
+        adopt_plans(config, tmp_path / "x", other, out / "pybullet" / weak.name)

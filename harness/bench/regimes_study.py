@@ -174,9 +174,12 @@ def run(out: Path = default_folder("sweep"), engines=("pybullet",), workers: int
         posterior_trials: int = POSTERIOR_TRIALS, truth_trials: int = TRUTH_TRIALS,
         analytic_draws: int = ANALYTIC_DRAWS, log=print) -> dict:
     """Run (or resume) every regime's experiment in each engine, then :func:`study`.
-    ``objects``: the sweep's objects (default :func:`regime_objects.objects`)."""
+    ``objects``: the sweep's objects (default :func:`regime_objects.objects`). The engines
+    after the first adopt the plans the first made of each regime
+    (:func:`harness.experiment.adopt_plans`: the same plans, made once) and simulate them."""
     from harness.config import parse_config
-    from harness.experiment import run_experiment
+    from harness.experiment import adopt_plans, run_experiment
+    from harness.ledger import FILENAME
     from harness.memory import check_config
     from harness.outputs import command_line, folder_lock, output_folder
     from harness.report import write_report
@@ -194,6 +197,16 @@ def run(out: Path = default_folder("sweep"), engines=("pybullet",), workers: int
                                   default_name=doc["name"])
             plan_memory = check_config(config, workers, None)
             with folder_lock(folder, command_line()):
+                first = out / engines[0] / regime.name
+                if engine != engines[0] and (first / FILENAME).is_file():
+                    # The regime's plans, made in the first engine, are this engine's too.
+                    source = parse_config(regime_config(regime, scenes[regime.objects_key], engines[0], planners,
+                                                        posterior_trials, truth_trials, analytic_draws),
+                                          source=f"bench regimes: {regime.name}", base_dir=out,
+                                          default_name=doc["name"])
+                    adopted = adopt_plans(config, folder, source, first)
+                    if adopted:
+                        log(f"{engine} {regime.name}: {adopted} plans of the {engines[0]} run adopted")
                 stats = run_experiment(config, folder, workers=workers, scheduler=scheduler, log=log,
                                        plan_memory=plan_memory)
                 if stats.interrupted:
