@@ -496,3 +496,35 @@ def test_the_load_cases_lines_give_every_force_of_every_case():
     lines = _load_lines(res)
     assert len(lines) == 4 and "2.00 N  ratio 1.26" in lines[2] and "(slipped 16)" in lines[2]
     assert "success 1.00" in lines[3] and "(" not in lines[3]
+
+
+def test_the_rounded_end_cases_are_capsules_of_the_bars_mass_gripped_on_or_beside_the_arc():
+    """bench lift's end cases: a rounded bar is a capsule of the bar's length and width,
+    whose area is (L - w) w + pi (w / 2)^2 (to 0.2 %, the arcs drawn as polygons) and whose
+    density gives the case's mass; its centre of mass is the outline's centre and the grasp
+    lies `short` from its tip (the scene's shape; the body extruded is its outline on the
+    grid, as for every case of bench lift). Gripped 12 mm from the end of a 15 mm radius,
+    the 1 cm plates reach from 7 to 17 mm, 2 mm of flat wall and the arc: the approach
+    noise puts a share of the draws' plates on an edge (the release applies); 20 mm from
+    the end they span 15-25 mm, the flat wall, and no draw is an edge contact, as on the
+    square bar."""
+    from harness.bench.lift_study import END_CASES, _exact_draws
+
+    rounded = [h for h in END_CASES if h.rounded]
+    assert {h.short for h in rounded} == {0.012, 0.02} and len(END_CASES) == 4
+    length = 0.09
+    for hang in rounded:
+        scene = hang.scene(length)
+        outline = scene.shape
+        w = hang.width
+        assert outline.area == pytest.approx((length - w) * w + math.pi * (w / 2) ** 2, rel=2e-3)
+        assert outline.area * scene.physics.density * hang.thickness == pytest.approx(hang.mass, rel=2e-3)
+        assert outline.centroid.x == pytest.approx(0.0, abs=1e-6)
+        grasp = hang.grasp(length)
+        assert grasp[0, 0] == grasp[1, 0] == pytest.approx(0.5 * length - hang.short)
+        settings, _, draws = _exact_draws(scene, 200, 0, "rounded end test")
+        edge = np.nanmean(evaluate_draws(grasp, draws, settings, lift_inputs=True).lift_inputs["edge"])
+        if hang.short < w / 2 + 0.5 * settings.jaw_width:  # the plate reaches over the arc
+            assert 0.2 < edge < 0.8, edge
+        else:
+            assert edge < 0.01, edge
