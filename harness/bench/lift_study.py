@@ -399,11 +399,12 @@ class HangBar:
 HANG_LENGTHS = tuple(np.round(np.arange(0.06, 0.1751, 0.005), 3))
 #: A heavy and a light bar, both turned by their weight from 12 cm on (where they hang near the table).
 HANG_BARS = (HangBar(0.4, 0.5, 10.0), HangBar(0.1, 0.5, 3.0))
-#: Square against rounded ends, at a weak grip (200 g, 5 N): gripped 12 mm from the end, on
-#: a rounded end's last 3 mm of flat wall (the plate's side edge on it, the rest over the
-#: arc), and 20 mm from it, on parallel walls. The posterior samples' outlines round the
-#: ends of thin parts, and both engines lose turned objects gripped near such ends more
-#: than on the true outline (docs/lift.md, "Why P_L misses where it does").
+#: Square against rounded ends, at a weak grip (200 g, 5 N): gripped 12 mm from the end (the
+#: 1 cm plates over the flat wall's last 2 mm and the 15 mm arc; the approach noise puts a
+#: share of the draws' plates on an edge), and 20 mm from it, on parallel walls. The
+#: posterior samples' outlines round the ends of thin parts, and both engines lose turned
+#: objects gripped near such ends more than on the true outline (docs/lift.md, "Why P_L
+#: misses where it does").
 END_CASES = tuple(HangBar(0.2, 0.5, 5.0, short=short, rounded=rounded)
                   for short in (0.012, 0.02) for rounded in (False, True))
 
