@@ -24,7 +24,7 @@ from __future__ import annotations
 import json
 import math
 import os
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -200,10 +200,7 @@ def run(out: Path = default_folder("sweep"), engines=("pybullet",), workers: int
                 first = out / engines[0] / regime.name
                 if engine != engines[0] and (first / FILENAME).is_file():
                     # The regime's plans, made in the first engine, are this engine's too.
-                    source = parse_config(regime_config(regime, scenes[regime.objects_key], engines[0], planners,
-                                                        posterior_trials, truth_trials, analytic_draws),
-                                          source=f"bench regimes: {regime.name}", base_dir=out,
-                                          default_name=doc["name"])
+                    source = replace(config.with_engine(engines[0]), name=config.name)
                     adopted = adopt_plans(config, folder, source, first)
                     if adopted:
                         log(f"{engine} {regime.name}: {adopted} plans of the {engines[0]} run adopted")
