@@ -25,6 +25,12 @@ class Grid:
     size: int
     extent: float
 
+    def __post_init__(self):
+        # Plain Python numbers: a float32 field times the cell is then float32 whatever
+        # made the grid (numpy's rule for Python scalars), as the compiled reads assume.
+        object.__setattr__(self, "size", int(self.size))
+        object.__setattr__(self, "extent", float(self.extent))
+
     @property
     def cell(self) -> float:
         """Cell side h in metres."""

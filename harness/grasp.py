@@ -434,101 +434,70 @@ def _refine(fields, fidx, start, d, t, dt):
     """Newton steps on the bicubic interpolant along start + t d, kept within one march
     step of the bracketed crossing; returns the parameters, contact points, unit normals
     (the gradient at the last iterate, 1e-7 m or less from the contact), and whether
-    the gradient there is long enough to define a normal."""
-    lo, hi = t - dt, t + dt
-    for _ in range(NEWTON_STEPS):
-        value, grad = interpolate(fields, fidx, start + t[:, None] * d)
-        slope = np.einsum("ij,ij->i", grad, d)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            step = np.where(np.abs(slope) > 1e-12, value / slope, 0.0)
-        t = np.clip(t - step, lo, hi)
-    norm = np.linalg.norm(grad, axis=1)
-    valid = np.isfinite(norm) & (norm >= MIN_GRADIENT)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        normal = grad / norm[:, None]
-    return t, start + t[:, None] * d, normal, valid
+    the gradient there is long enough to define a normal (compiled: harness.kernels)."""
+    return _kernels().refine(*_flat_fields(fields), _ints(fidx), _floats(start), _floats(d), _floats(t), _floats(dt),
+                          NEWTON_STEPS, MIN_GRADIENT)
 
 
-def _cell_coordinates(grid: Grid, points: np.ndarray):
-    """Lower-left grid node (ix, iy) of the interpolation cell holding each point (the
-    border cell for points beyond the nodes) and the local coordinates (s, r) in it."""
-    m = grid.size
-    ux = (points[..., 0] - grid.coords[0]) / grid.cell
-    uy = (points[..., 1] - grid.coords[0]) / grid.cell
-    ix = np.clip(np.floor(ux).astype(np.int64), 0, m - 2)
-    iy = np.clip(np.floor(uy).astype(np.int64), 0, m - 2)
-    return ix, iy, ux - ix, uy - iy
+def _kernels():
+    """harness.kernels, imported on first use: numba takes about a second to import, which
+    commands that never look for a contact need not pay."""
+    from harness import kernels
+
+    return kernels
+
+
+def load_kernels() -> None:
+    """Load the compiled reads now (from numba's cache, about a second and a half with
+    numba's import; compiling them on a machine's first run takes a few seconds). A
+    process that forks planners calls it first, so that no planner's time budget pays
+    for it."""
+    unit = SDFBatch(Grid(8, 1.0), np.zeros((8, 8)), np.zeros((8, 8, 2)))
+    find_contacts(unit, [[-0.4, 0.0]], [[0.4, 0.0]], 0.1)
+    interpolate(unit, np.zeros(1, dtype=np.int64), np.zeros((1, 2)))
+
+
+def _flat_fields(fields: SDFBatch):
+    """The fields' arrays flattened, and the grid's numbers, as the kernels take them."""
+    grid = fields.grid
+    return (fields.values.reshape(-1), fields.gx.reshape(-1), fields.gy.reshape(-1), fields.twist.reshape(-1),
+            grid.size, float(grid.coords[0]), grid.cell)
+
+
+def _ints(a) -> np.ndarray:
+    return _array(a, np.int64)
+
+
+def _floats(a) -> np.ndarray:
+    return _array(a, np.float64)
+
+
+def _array(a, dtype) -> np.ndarray:
+    """Contiguous and writeable (a copy only where needed): numba compiles, and loads from
+    its cache, one specialisation per kind of array, read-only views being another kind."""
+    return np.require(a, dtype=dtype, requirements=("C", "W"))
 
 
 def read_lines(fields: SDFBatch, fidx, starts, d, ts) -> np.ndarray:
     """Bilinear field values (B, K, T) along the lines starts[b, k] + ts * d[b] of field
     fidx[b], with ts (T,) shared or (B, T) per grasp (a quick march; see
     :func:`interpolate` for the smooth interpolant); outside the grid's nodes the object
-    is taken to be absent (a large positive value)."""
-    grid, m = fields.grid, fields.grid.size
+    is taken to be absent (a large positive value). In single precision, the positions
+    too (compiled: harness.kernels)."""
+    grid = fields.grid
+    fidx = _ints(np.broadcast_to(fidx, (len(starts),)))
     ts = np.asarray(ts)
-    t32 = ts.astype(np.float32)[None, None, :] if ts.ndim == 1 else ts.astype(np.float32)[:, None, :]
-
-    def grid_units(axis):  # positions along one axis, in cells from the first node
-        u = np.repeat(((starts[..., axis] - grid.coords[0]) / grid.cell).astype(np.float32)[..., None],
-                      ts.shape[-1], axis=2)
-        u += t32 * (d[:, axis] / grid.cell).astype(np.float32)[:, None, None]
-        return u
-
-    ux, uy = grid_units(0), grid_units(1)
-    inside = (ux >= 0) & (ux <= m - 1) & (uy >= 0) & (uy <= m - 1)
-    ix = np.clip(ux.astype(np.intp), 0, m - 2)
-    iy = np.clip(uy.astype(np.intp), 0, m - 2)
-    ux -= ix  # now the local coordinates within the cell
-    uy -= iy
-    i00 = iy * m
-    i00 += ix
-    i00 += (fidx * (m * m))[:, None, None]
-    flat = fields.values.reshape(-1)
-    lower = flat.take(i00)
-    lower += ux * (flat.take(i00 + 1) - lower)
-    i00 += m
-    upper = flat.take(i00)
-    upper += ux * (flat.take(i00 + 1) - upper)
-    upper -= lower
-    upper *= uy
-    upper += lower
-    return np.where(inside, upper, np.float32(1.0))
+    t32 = _array(np.broadcast_to(ts.astype(np.float32), (len(fidx), ts.shape[-1])), np.float32)
+    return _kernels().read_lines(fields.values.reshape(-1), grid.size, float(grid.coords[0]), grid.cell, fidx,
+                              _floats(starts), _floats(d), t32)
 
 
 def interpolate(fields: SDFBatch, fidx, points):
     """Value (B,) and gradient (B, 2) of field fidx[b] at points (B, 2), through the
-    bicubic Hermite interpolant of the fields' values, gradients and cross derivatives."""
-    m, h = fields.grid.size, fields.grid.cell
-    ix, iy, s, r = _cell_coordinates(fields.grid, points)
-    i00 = fidx * (m * m) + iy * m + ix
-    # Corner data as (b, a, B): a indexes x (ix, ix + 1), b indexes y (iy, iy + 1).
-    corners = (i00 + np.array([0, 1, m, m + 1])[:, None]).reshape(2, 2, -1)
-    f = fields.values.reshape(-1).take(corners)
-    fx = fields.gx.reshape(-1).take(corners) * h
-    fy = fields.gy.reshape(-1).take(corners) * h
-    fxy = fields.twist.reshape(-1).take(corners) * (h * h)
-    (h0s, h1s), (g0s, g1s), (dh0s, dh1s), (dg0s, dg1s) = _hermite_basis(s)
-    (h0r, h1r), (g0r, g1r), (dh0r, dh1r), (dg0r, dg1r) = _hermite_basis(r)
-    # Along x within each of the two rows b, then along y.
-    along = h0s * f[:, 0] + h1s * f[:, 1] + g0s * fx[:, 0] + g1s * fx[:, 1]
-    along_y = h0s * fy[:, 0] + h1s * fy[:, 1] + g0s * fxy[:, 0] + g1s * fxy[:, 1]
-    slope = dh0s * f[:, 0] + dh1s * f[:, 1] + dg0s * fx[:, 0] + dg1s * fx[:, 1]
-    slope_y = dh0s * fy[:, 0] + dh1s * fy[:, 1] + dg0s * fxy[:, 0] + dg1s * fxy[:, 1]
-    value = h0r * along[0] + h1r * along[1] + g0r * along_y[0] + g1r * along_y[1]
-    dx = h0r * slope[0] + h1r * slope[1] + g0r * slope_y[0] + g1r * slope_y[1]
-    dy = dh0r * along[0] + dh1r * along[1] + dg0r * along_y[0] + dg1r * along_y[1]
-    return value, np.column_stack([dx, dy]) / h
-
-
-def _hermite_basis(t):
-    """Cubic Hermite basis on [0, 1] for the two ends: value weights (H0, H1), slope
-    weights (G0, G1) and their derivatives."""
-    t2 = t * t
-    t3 = t2 * t
-    h1 = 3 * t2 - 2 * t3
-    d1 = 6 * (t - t2)
-    return (1 - h1, h1), (t - 2 * t2 + t3, t3 - t2), (-d1, d1), (1 - 4 * t + 3 * t2, 3 * t2 - 2 * t)
+    bicubic Hermite interpolant of the fields' values, gradients and cross derivatives
+    (compiled: harness.kernels)."""
+    points = _floats(points).reshape(-1, 2)
+    return _kernels().interpolate(*_flat_fields(fields), _ints(np.broadcast_to(fidx, (len(points),))), points)
 
 
 def force_closure(c1, c2, n1, n2, friction) -> np.ndarray:

@@ -80,6 +80,7 @@ def plan(cell: Cell, label: str, name: str, params: dict, budget: float | None,
     crash and its memory (``memory_bytes`` beyond the caller's) stay there, and it is
     killed at its deadline (harness.deadline) when it has a ``budget``. Never raises for
     the planner's faults; they are the row's status."""
+    from harness.grasp import load_kernels
     from harness.seeding import stream
     from planners.base import Problem
     from planners.registry import builtins
@@ -91,6 +92,7 @@ def plan(cell: Cell, label: str, name: str, params: dict, budget: float | None,
     problem = Problem(cell.belief, cell.settings, time_budget_s=budget)
     rng = stream(cell.seed, cell.scene.name, cell.realisation, "planner", label)
     builtins()  # imported here once, not in every plan's process; plugins load there only
+    load_kernels()  # the compiled contact search, loaded once here: no plan's budget pays for it
     outcome = isolation.call(_plan_in_child, name, params, problem, rng,
                              deadline_s=None if budget is None else deadline_s(budget), memory_bytes=memory_bytes)
     if outcome.kind != "returned":

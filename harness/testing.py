@@ -13,6 +13,7 @@ from harness import isolation
 from harness.belief import Belief, build_belief
 from harness.errors import describe
 from harness.gpis import GPIS
+from harness.grasp import load_kernels
 from harness.readonly import InputsChanged, changes, fingerprint
 from harness.scene import load_scene
 from harness.seeding import stream
@@ -60,6 +61,7 @@ def check_planner(planner_class, scenes=("disk", "rectangle"), seeds=(0, 1), tim
     _require(not unstored, f"{name}: store each parameter under its own name (in __init__, "
              f"self.<name> = <name>); not stored: {', '.join(unstored)}")
 
+    load_kernels()  # loaded before the forks, as pipeline.plan does: no budget pays for it
     report = {}
     for scene_name in scenes:
         scene = load_scene(scene_name)
