@@ -460,8 +460,18 @@ def load_kernels() -> None:
 def _flat_fields(fields: SDFBatch):
     """The fields' arrays flattened, and the grid's numbers, as the kernels take them."""
     grid = fields.grid
-    return (fields.values.reshape(-1), fields.gx.reshape(-1), fields.gy.reshape(-1), fields.twist.reshape(-1),
+    return (*(_flat(a) for a in (fields.values, fields.gx, fields.gy, fields.twist)),
             grid.size, float(grid.coords[0]), grid.cell)
+
+
+def _flat(field: np.ndarray) -> np.ndarray:
+    """A field flattened, as a read-only view whatever the field is (the belief's fields
+    are read-only, derived ones are not): one specialisation of each kernel (_array)."""
+    flat = field.reshape(-1)
+    if flat.flags.writeable:
+        flat = flat.view()
+        flat.flags.writeable = False
+    return flat
 
 
 def _ints(a) -> np.ndarray:
@@ -488,7 +498,7 @@ def read_lines(fields: SDFBatch, fidx, starts, d, ts) -> np.ndarray:
     fidx = _ints(np.broadcast_to(fidx, (len(starts),)))
     ts = np.asarray(ts)
     t32 = _array(np.broadcast_to(ts.astype(np.float32), (len(fidx), ts.shape[-1])), np.float32)
-    return _kernels().read_lines(fields.values.reshape(-1), grid.size, float(grid.coords[0]), grid.cell, fidx,
+    return _kernels().read_lines(_flat(fields.values), grid.size, float(grid.coords[0]), grid.cell, fidx,
                               _floats(starts), _floats(d), t32)
 
 
