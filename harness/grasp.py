@@ -453,8 +453,9 @@ def load_kernels() -> None:
     process that forks planners calls it first, so that no planner's time budget pays
     for it."""
     unit = SDFBatch(Grid(8, 1.0), np.zeros((8, 8)), np.zeros((8, 8, 2)))
-    find_contacts(unit, [[-0.4, 0.0]], [[0.4, 0.0]], 0.1)
+    contacts = find_contacts(unit, [[-0.4, 0.0]], [[0.4, 0.0]], 0.1)
     interpolate(unit, np.zeros(1, dtype=np.int64), np.zeros((1, 2)))
+    plate_closure(contacts, 0.5, np.zeros(2), 1.0, with_quality=False)
 
 
 def _flat_fields(fields: SDFBatch):
@@ -551,12 +552,8 @@ def plate_closure(contacts: Contacts, friction, com, torque_scale: float, with_q
     com = np.broadcast_to(np.asarray(com, dtype=float), (b, 2))
     patch1 = np.concatenate([contacts.c1[:, None], contacts.patch1], axis=1)  # (B, K + 1, 2)
     patch2 = np.concatenate([contacts.c2[:, None], contacts.patch2], axis=1)
-    line = patch2[:, None, :, :] - patch1[:, :, None, :]  # (B, K + 1, K + 1, 2)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        line /= np.linalg.norm(line, axis=-1, keepdims=True)
-    depth = np.minimum(-np.einsum("bijk,bk->bij", line, contacts.n1), np.einsum("bijk,bk->bij", line, contacts.n2))
-    best = np.argmax(np.where(np.isfinite(depth), depth, -np.inf).reshape(b, -1), axis=1)
-    i, j = np.divmod(best, patch2.shape[1])
+    # The pair whose line lies deepest in both cones (compiled: harness.kernels).
+    i, j = _kernels().deepest_pairs(patch1, patch2, _floats(contacts.n1), _floats(contacts.n2))
     rows = np.arange(b)
     p1, p2 = patch1[rows, i], patch2[rows, j]
     closure = np.zeros(b, dtype=bool)

@@ -169,3 +169,35 @@ def read_lines(values, m, c0, cell, fidx, starts, d, ts):
                 upper = upper + fx * (values[at + m + 1] - upper)
                 out[i, j, q] = (upper - lower) * fy + lower
     return out
+
+
+@njit(cache=True, error_model="numpy")
+def deepest_pairs(patch1, patch2, n1, n2):
+    """harness.grasp.plate_closure's choice of contact pair: for each b, the pair (i, j)
+    of a point of patch1[b] (K1, 2) and one of patch2[b] (K2, 2) whose unit line lies
+    deepest inside both friction cones, min(-line . n1, line . n2); the first such pair in
+    row-major order, as np.argmax, non-finite depths counting as -inf, (0, 0) if all are."""
+    b, k1, k2 = patch1.shape[0], patch1.shape[1], patch2.shape[1]
+    first = np.empty(b, dtype=np.int64)
+    second = np.empty(b, dtype=np.int64)
+    for r in range(b):
+        best, bi, bj = -np.inf, 0, 0
+        for i in range(k1):
+            for j in range(k2):
+                lx = patch2[r, j, 0] - patch1[r, i, 0]
+                ly = patch2[r, j, 1] - patch1[r, i, 1]
+                norm = math.sqrt(lx * lx + ly * ly)
+                lx = lx / norm
+                ly = ly / norm
+                a = -(lx * n1[r, 0] + ly * n1[r, 1])
+                c = lx * n2[r, 0] + ly * n2[r, 1]
+                # np.minimum: NaN if either is.
+                depth = a if a < c else c
+                if a != a or c != c:
+                    depth = np.nan
+                if not math.isfinite(depth):
+                    depth = -np.inf
+                if depth > best:
+                    best, bi, bj = depth, i, j
+        first[r], second[r] = bi, bj
+    return first, second

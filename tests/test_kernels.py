@@ -202,3 +202,45 @@ def test_refine_on_a_flat_field_has_no_normal():
         np.testing.assert_array_equal(a, b)
     assert not got[3].any() and np.isnan(got[2]).all()
     np.testing.assert_array_equal(got[0], t)
+
+
+def ref_deepest_pairs(patch1, patch2, n1, n2):
+    """plate_closure's pair choice as array code (the formulation the kernel replaced)."""
+    b = len(patch1)
+    line = patch2[:, None, :, :] - patch1[:, :, None, :]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        line /= np.linalg.norm(line, axis=-1, keepdims=True)
+    depth = np.minimum(-np.einsum("bijk,bk->bij", line, n1), np.einsum("bijk,bk->bij", line, n2))
+    best = np.argmax(np.where(np.isfinite(depth), depth, -np.inf).reshape(b, -1), axis=1)
+    return np.divmod(best, patch2.shape[1])
+
+
+def test_the_deepest_pair_is_the_array_formulations(fields):
+    """On contacts found on posterior samples (flat patches give near-ties between pairs,
+    NaN where a plate line does not touch) and on random patches with NaN, repeated and
+    infinite points."""
+    from harness.kernels import deepest_pairs
+
+    rng = np.random.default_rng(5)
+    b = 400
+    angle = rng.uniform(0, np.pi, b)
+    u = np.column_stack([np.cos(angle), np.sin(angle)])
+    centre = rng.normal(0.0, 0.01, (b, 2))
+    found = find_contacts(fields, centre - 0.09 * u, centre + 0.09 * u, 0.01,
+                          field_index=rng.integers(0, len(fields), b))
+    cases = [(np.concatenate([found.c1[:, None], found.patch1], axis=1),
+              np.concatenate([found.c2[:, None], found.patch2], axis=1), found.n1, found.n2)]
+    p1, p2 = rng.normal(size=(b, 6, 2)), rng.normal(size=(b, 6, 2))
+    p1[rng.random((b, 6)) < 0.2] = np.nan
+    p2[:, 3] = p1[:, 3]  # zero-length lines
+    p2[::17, 1] = np.inf
+    cases.append((p1, p2, rng.normal(size=(b, 2)), rng.normal(size=(b, 2))))
+    flush = 0
+    for p1, p2, n1, n2 in cases:
+        p1, p2, n1, n2 = (np.ascontiguousarray(a, dtype=float) for a in (p1, p2, n1, n2))
+        i, j = deepest_pairs(p1, p2, n1, n2)
+        ref_i, ref_j = ref_deepest_pairs(p1.copy(), p2, n1, n2)
+        np.testing.assert_array_equal(i, ref_i)
+        np.testing.assert_array_equal(j, ref_j)
+        flush += int(((i > 0) | (j > 0)).sum())
+    assert flush > 50  # pairs other than the first contacts were chosen: the case is not vacuous
