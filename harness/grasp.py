@@ -6,7 +6,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
-from functools import cached_property
+from functools import cache, cached_property
 
 import numpy as np
 from scipy import ndimage
@@ -435,8 +435,8 @@ def _refine(fields, fidx, start, d, t, dt):
     step of the bracketed crossing; returns the parameters, contact points, unit normals
     (the gradient at the last iterate, 1e-7 m or less from the contact), and whether
     the gradient there is long enough to define a normal (compiled: harness.kernels)."""
-    return _kernels().refine(*_flat_fields(fields), _ints(fidx), _floats(start), _floats(d), _floats(t), _floats(dt),
-                          NEWTON_STEPS, MIN_GRADIENT)
+    return _kernels().refine(*_flat_fields(fields), _ints(fidx), _floats(start), _floats(d), _floats(t),
+                             _floats(dt), NEWTON_STEPS, MIN_GRADIENT)
 
 
 def _kernels():
@@ -447,8 +447,9 @@ def _kernels():
     return kernels
 
 
+@cache
 def load_kernels() -> None:
-    """Load the compiled reads now (from numba's cache, about a second and a half with
+    """Load the compiled reads now (once per process) (from numba's cache, about a second and a half with
     numba's import; compiling them on a machine's first run takes a few seconds). A
     process that forks planners calls it first, so that no planner's time budget pays
     for it."""
@@ -500,7 +501,7 @@ def read_lines(fields: SDFBatch, fidx, starts, d, ts) -> np.ndarray:
     ts = np.asarray(ts)
     t32 = _array(np.broadcast_to(ts.astype(np.float32), (len(fidx), ts.shape[-1])), np.float32)
     return _kernels().read_lines(_flat(fields.values), grid.size, float(grid.coords[0]), grid.cell, fidx,
-                              _floats(starts), _floats(d), t32)
+                                 _floats(starts), _floats(d), t32)
 
 
 def interpolate(fields: SDFBatch, fidx, points):

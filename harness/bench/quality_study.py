@@ -30,12 +30,14 @@ def scene_quality(name: str, variants=tuple((p, p, {}) for p in PLANNERS), metri
     plan time of each planner variant's grasp (label, registry name, parameters) on one
     scene, for ``seeds`` independent sensor readings."""
     from harness.belief import build_belief
+    from harness.grasp import load_kernels
     from harness.quality import default_streams, draw_evaluation, estimate_p_f
     from harness.scene import load_scene
     from harness.seeding import stream
     from planners.base import Problem
     from planners.registry import make_planner
 
+    load_kernels()  # as pipeline.plan does before a plan: no plan time pays for loading them
     scene = load_scene(name)
     out = {"scene": name, metric: {v[0]: [] for v in variants}, "plan_s": {v[0]: [] for v in variants}}
     for seed in range(seeds):
