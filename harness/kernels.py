@@ -124,9 +124,11 @@ def refine(values, gx, gy, twist, m, c0, cell, fidx, start, d, t, dt, newton_ste
             slope = gxi * dx + gyi * dy
             step = value / slope if abs(slope) > 1e-12 else 0.0
             ti = ti - step
-            # np.clip: NaN stays NaN.
-            if ti == ti:
+            # np.clip: a NaN parameter or bound gives NaN.
+            if ti == ti and lo == lo and hi == hi:
                 ti = min(max(ti, lo), hi)
+            else:
+                ti = np.nan
         norm = math.sqrt(gxi * gxi + gyi * gyi)
         t_out[i] = ti
         point[i, 0], point[i, 1] = sx + ti * dx, sy + ti * dy

@@ -141,6 +141,7 @@ def test_refine_is_the_array_formulation(fields):
     d = 0.12 * np.column_stack([np.cos(angle), np.sin(angle)])
     t = rng.uniform(0.0, 1.0, n)
     dt = rng.uniform(0.005, 0.05, n)
+    t[:2], dt[2:4] = np.nan, np.nan  # NaN parameters and bounds stay NaN, as np.clip leaves them
     fidx = rng.integers(0, len(fields), n)
     got = _refine(fields, fidx, start, d, t, dt)
     with np.errstate(invalid="ignore"):
