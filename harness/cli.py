@@ -398,7 +398,8 @@ def _bench_settings(args) -> dict:
             "bandit": bandit,
             "engines": engines_study.Settings(out=Path(args.out or "results/engines"), workers=args.workers),
             "regimes": regimes_study.Settings(out=Path(args.out) if args.out else None, engines=tuple(args.engines),
-                                              workers=args.workers, scheduler=args.scheduler, objects=args.objects)}
+                                              workers=args.workers, scheduler=args.scheduler, objects=args.objects,
+                                              regimes=args.regimes)}
 
 
 def _bench_names() -> list[str]:
@@ -415,6 +416,16 @@ def _engine_list(text: str) -> tuple[str, ...]:
     if not names or bad:
         raise argparse.ArgumentTypeError(f"expected engines from {', '.join(ENGINES)}, comma-separated; got '{text}'")
     return names
+
+
+def _regime_list(text: str) -> tuple[str, ...]:
+    from harness.bench.regimes_study import regimes_named
+
+    names = tuple(dict.fromkeys(n.strip() for n in text.split(",") if n.strip()))
+    try:
+        return tuple(r.name for r in regimes_named(names))
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
 
 
 _GRASP = {"nargs": 4, "type": _coordinate, "required": True, "metavar": ("X1", "Y1", "X2", "Y2"),
@@ -574,6 +585,10 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--engines", type=_engine_list, default=("pybullet",),
                        help="bench regimes: the engines to run the sweep in, comma-separated "
                             "(default pybullet; pybullet,mujoco runs both)")
+    bench.add_argument("--regimes", type=_regime_list, default=None, metavar="NAMES",
+                       help="bench regimes: run only these regimes, comma-separated (default: all eleven); "
+                            "each is the run the whole sweep makes, so a later run of all of them into the "
+                            "same --out resumes these")
     bench.set_defaults(func=_bench)
     return parser
 

@@ -148,7 +148,10 @@ def test_outputs_and_the_command_line(sweep, tmp_path):
     again = rs.run(out, workers=1, regimes=REGIMES, objects=OBJECTS, planners=PLANNERS, posterior_trials=6,
                    truth_trials=2, analytic_draws=60, log=lambda line: None)
     pd.testing.assert_frame_equal(pd.DataFrame(again["rows"]), pd.DataFrame(result["rows"]))
-    assert "pooled over the sweep (design)" in "\n".join(rs.format_lines(result))
+    text = "\n".join(rs.format_lines(result))  # a part of the sweep says which regimes it pooled
+    assert "pooled over centre, weak, weak-slippery-noisy (design)" in text and "over the sweep" not in text
+    whole = {**result, "regimes": [{"name": r.name} for r in rs.REGIMES]}
+    assert "pooled over the sweep (design)" in "\n".join(rs.format_lines(whole))
     bad = subprocess.run([sys.executable, "-m", "harness", "bench", "regimes", "--engines", "bullet",
                           "--out", str(tmp_path / "x")], capture_output=True, text=True)
     assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1 and "--engines" in bad.stderr
@@ -320,3 +323,32 @@ def test_a_second_engine_adopts_the_first_engines_plans(sweep, tmp_path):
                          source="test", base_dir=out, default_name=doc["name"])
     with pytest.raises(ValueError, match="more than the engine"):
         adopt_plans(config, tmp_path / "x", other, out / "pybullet" / weak.name)
+
+
+def test_a_part_of_the_sweep_runs_the_named_regimes_in_the_sweeps_order(monkeypatch, capsys):
+    """bench regimes --regimes: the named regimes, in the sweep's order whatever the order
+    given, reach the run (the same Regime values the whole sweep uses, so a later full run
+    resumes them); an unknown or empty list is one line naming the sweep's regimes and
+    exit code 2, before any folder is made."""
+    from harness.cli import main
+
+    assert [r.name for r in rs.regimes_named(["slippery", "weak"])] == ["weak", "slippery"]
+    assert rs.regimes_named(["firm-heavy"]) == (rs.REGIMES[-1],)
+    with pytest.raises(ValueError, match="unknown regimes bogus, nope; the sweep's are centre, weak"):
+        rs.regimes_named(["weak", "nope", "bogus"])
+    seen = {}
+
+    def fake_run(out, engines, workers, scheduler, regimes, objects, log):
+        seen.update(out=out, regimes=regimes, objects=len(objects))
+        return {"rows": [], "verdicts": [], "pooled": {}}
+
+    monkeypatch.setattr(rs, "run", fake_run)
+    rs.benchmark(rs.Settings(out=Path("unused"), regimes=("large-heavy", "centre")))
+    assert seen["regimes"] == (rs.CENTRE, rs.REGIMES[8]) and rs.REGIMES[8].name == "large-heavy"
+    rs.benchmark(rs.Settings(out=Path("unused")))
+    assert seen["regimes"] == rs.REGIMES and seen["objects"] == 24
+    for bad in ("weak,nope", ","):
+        assert main(["bench", "regimes", "--regimes", bad, "--out", "never-made"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "--regimes" in err[0] and "centre, weak, strong" in err[0]
+    assert not Path("never-made").exists()

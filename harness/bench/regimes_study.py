@@ -144,13 +144,15 @@ class Settings:
     scheduler (None: local processes); the object set
     (:data:`~harness.bench.regime_objects.OBJECT_SETS`: 'sweep', the 24 objects the model
     and planners were settled on, six of them held out; 'fresh', 24 others of the same
-    families, all held out)."""
+    families, all held out); the names of the regimes to run (None: every one of
+    :data:`REGIMES`)."""
 
     out: Path | None = None
     engines: tuple = ("pybullet",)
     workers: int | None = None
     scheduler: str | None = None
     objects: str = "sweep"
+    regimes: tuple | None = None
 
 
 def default_folder(object_set: str) -> Path:
@@ -164,9 +166,25 @@ def benchmark(settings: Settings = Settings(), log=print) -> dict:
     from harness.bench.regime_objects import OBJECT_SETS
 
     out = Path(settings.out) if settings.out is not None else default_folder(settings.objects)
+    regimes = REGIMES if settings.regimes is None else regimes_named(settings.regimes)
     result = run(out=out, engines=settings.engines, workers=settings.workers, scheduler=settings.scheduler,
-                 objects=OBJECT_SETS[settings.objects](), log=log)
+                 regimes=regimes, objects=OBJECT_SETS[settings.objects](), log=log)
     return {**result, "object_set": settings.objects}
+
+
+def regimes_named(names) -> tuple:
+    """The regimes of :data:`REGIMES` with these names, in the sweep's order (a part of
+    the sweep: each regime's run is the one the whole sweep makes, so a later run of every
+    regime into the same folder resumes it). Raises ValueError naming the unknown ones."""
+    names = set(names)
+    unknown = sorted(names - {r.name for r in REGIMES})
+    known = ", ".join(r.name for r in REGIMES)
+    if not names:
+        raise ValueError(f"no regime given; the sweep's are {known}")
+    if unknown:
+        raise ValueError(f"unknown regime{'s' if len(unknown) > 1 else ''} {', '.join(unknown)}; "
+                         f"the sweep's are {known}")
+    return tuple(r for r in REGIMES if r.name in names)
 
 
 def run(out: Path = default_folder("sweep"), engines=("pybullet",), workers: int | None = None,
@@ -475,8 +493,10 @@ def format_lines(res: dict) -> list[str]:
                          f"{r.get('retest_spearman', math.nan):>7.2f}"
                          f"{r.get('engine_spearman', math.nan):>8.2f}{r.get('engine_brier', math.nan):>7.3f}"
                          f"{r['success_rate']:>6.2f}  {diffs}")
+        ran = [r["name"] for r in res.get("regimes", [])]
+        scope = "the sweep" if len(ran) in (0, len(REGIMES)) else ", ".join(ran)
         for part, d in res["pooled"][engine].items():
-            lines.append(f"pooled over the sweep ({part}): " + "; ".join(
+            lines.append(f"pooled over {scope} ({part}): " + "; ".join(
                 f"{p} {v['difference']:+.3f} [{v['ci_low']:+.3f}, {v['ci_high']:+.3f}]" for p, v in d.items()))
         stops = [f"{r['regime']} {r['part']} {r['budget_stops']}" for r in res["rows"]
                  if r["engine"] == engine and r["part"] != "all" and r.get("budget_stops")]
