@@ -449,7 +449,7 @@ def _kernels():
 
 @cache
 def load_kernels() -> None:
-    """Load the compiled reads now (once per process) (from numba's cache, about a second and a half with
+    """Load the compiled reads now, once per process (from numba's cache: 0.7-1.2 s with
     numba's import; compiling them on a machine's first run takes a few seconds). A
     process that forks planners calls it first, so that no planner's time budget pays
     for it."""
