@@ -181,11 +181,15 @@ def _simulate(args) -> int:
     from harness.memory import check_single
     from harness.physics.simulate import SimulationSummary, make_trials
     from harness.physics.engines import make_runner
+    from harness.physics.trace import Tracer
     from harness.protocol import Protocol
 
     scene, grasp, settings = _scene_and_grasp(args)
     if args.frames is not None and Path(args.frames).exists() and not Path(args.frames).is_dir():
         raise InputError("--frames", None, f"{args.frames} exists and is not a folder")
+    if args.trace is not None and (Path(args.trace).is_dir() or not Path(args.trace).parent.is_dir()):
+        raise InputError("--trace", None, f"{args.trace} is a folder" if Path(args.trace).is_dir()
+                         else f"{Path(args.trace).parent} is not a folder")
     if args.shapes == "posterior":
         # As many draws as eval's default analytic draws: trial i is eval's posterior trial i.
         draws = pipeline.cell_draws(pipeline.DRAWS, args.trials)
@@ -196,8 +200,12 @@ def _simulate(args) -> int:
     trials = make_trials(settings, grasp, inputs.polygons, inputs.approach, inputs.friction)
     start = time.perf_counter()
     bar = tqdm(total=len(trials), unit="trial", disable=None, file=sys.stderr)
+    tracer = Tracer() if args.trace else None
     with make_runner(Protocol.of(args.engine)) as runner, bar:
-        results = runner.run(trials, frames=Path(args.frames) if args.frames else None, progress=bar.update)
+        results = runner.run(trials, frames=Path(args.frames) if args.frames else None, progress=bar.update,
+                             trace=tracer)
+    if tracer is not None:
+        tracer.write(Path(args.trace))
     summary = SimulationSummary(tuple(results), time.perf_counter() - start)
     out = summary.as_dict()
     if args.json:
@@ -213,6 +221,8 @@ def _simulate(args) -> int:
         print(f"outcomes: {counts}; {out['trials_per_s']:.1f} trials/s in {args.engine}")
         if args.frames:
             print(f"frames of the first trial in {args.frames}")
+        if args.trace:
+            print(f"the first trial's trace in {args.trace} ({len(tracer.rows)} checks)")
     return 0
 
 
@@ -486,6 +496,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_problem_options(p)
     p.add_argument("--frames", metavar="DIR", default=None,
                    help="write PNG snapshots of each phase of the first trial into DIR")
+    p.add_argument("--trace", metavar="FILE", default=None,
+                   help="write the first trial's trace, check by check (its turn, its slide in the jaws, "
+                        "each jaw's contact points), as CSV to FILE (docs/physics.md)")
     p.add_argument("--engine", choices=ENGINES, default=ENGINES[0],
                    help="the physics engine (default pybullet; docs/physics.md)")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")

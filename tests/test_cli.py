@@ -129,7 +129,10 @@ def test_simulate_bad_input_gets_one_line_and_exit_code_2(tmp_path, capsys):
                  ["simulate", "no_such_scene", "--grasp", "-0.045", "0", "0.045", "0"],
                  ["simulate", "rectangle", "--grasp", "-0.045", "0", "0.045", "0", "--shapes", "mean"],
                  ["simulate", "rectangle", "--grasp", "-0.045", "0", "0.045", "0", "--trials", "0"],
-                 ["simulate", "rectangle", "--grasp", "-0.045", "0", "0.045", "0", "--frames", str(not_a_folder)]):
+                 ["simulate", "rectangle", "--grasp", "-0.045", "0", "0.045", "0", "--frames", str(not_a_folder)],
+                 ["simulate", "rectangle", "--grasp", "-0.045", "0", "0.045", "0", "--trace", str(tmp_path)],
+                 ["simulate", "rectangle", "--grasp", "-0.045", "0", "0.045", "0", "--trace",
+                  str(not_a_folder / "trace.csv")]):
         assert main(argv) == 2, argv
         err = capsys.readouterr().err
         assert len(err.strip().splitlines()) == 1 and err.startswith("gpis-harness: error: "), (argv, err)

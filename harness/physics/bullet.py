@@ -92,7 +92,7 @@ class BulletRunner(BatchRunner):
         mass = trial.polygon.area * trial.thickness * trial.density
         return mass < LIGHT_FRACTION * self.jaw_mass(trial.gripper)
 
-    def _run_batch(self, batch: Sequence[Trial], frames: Path | None) -> list[TrialResult]:
+    def _run_batch(self, batch: Sequence[Trial], frames: Path | None, trace=None) -> list[TrialResult]:
         """The batch's trials in one world; its light objects (LIGHT_FRACTION) in a second
         world at a LIGHT_REFINE times finer step, each trial in the slot its place in the
         batch gives it."""
@@ -102,12 +102,14 @@ class BulletRunner(BatchRunner):
             slots = [k for k in range(len(batch)) if light[k] == finer]
             if slots:
                 protocol = self.protocol.finer(LIGHT_REFINE) if finer else self.protocol
-                self._run_world(batch, slots, protocol, frames if 0 in slots else None, results)
+                self._run_world(batch, slots, protocol, frames if 0 in slots else None, results,
+                                trace if 0 in slots else None)
         return results  # type: ignore[return-value]
 
     def _run_world(self, batch: Sequence[Trial], slots: list[int], protocol: Protocol, frames: Path | None,
-                   results: list) -> None:
-        """Run ``batch[k]`` for k in ``slots`` in one world under ``protocol``, into ``results[k]``."""
+                   results: list, trace=None) -> None:
+        """Run ``batch[k]`` for k in ``slots`` in one world under ``protocol``, into
+        ``results[k]``; ``trace`` records batch[0]."""
         camera = _Camera(frames, self.client) if frames is not None else None
         self._reset_world(protocol)
         if camera is not None:
@@ -122,6 +124,8 @@ class BulletRunner(BatchRunner):
             else:
                 active.append(_Slot(self, k, trial, (k * SLOT_SPACING, 0.0), protocol,
                                     camera if k == 0 else None))
+                if k == 0:
+                    active[-1].tracer = trace
         c = self.client
         while active:
             for slot in active:
@@ -233,6 +237,28 @@ class _Slot(TrialMachine):
 
     def on_table(self) -> bool:
         return bool(pb.getContactPoints(self.obj, self.runner.table, physicsClientId=self.runner.client))
+
+    def poses(self):
+        c = self.runner.client
+        out = []
+        for body in (self.grip, self.obj):
+            position, orientation = pb.getBasePositionAndOrientation(body, physicsClientId=c)
+            out += [np.array(position), np.array(pb.getMatrixFromQuaternion(orientation)).reshape(3, 3)]
+        return tuple(out)
+
+    def jaw_contacts(self):
+        """The contact manifold's points between the object and each jaw link (on the jaw)."""
+        from harness.physics.trace import pressure_centre
+
+        jaws = self.trial.gripper.jaw_links
+        points, forces = [[] for _ in jaws], [[] for _ in jaws]
+        for point in pb.getContactPoints(self.obj, self.grip, physicsClientId=self.runner.client):
+            if point[4] in jaws:
+                j = jaws.index(point[4])
+                points[j].append(point[6])
+                forces[j].append(point[9])
+        return [(len(points[j]), float(sum(forces[j])), pressure_centre(points[j], forces[j]))
+                for j in range(len(jaws))]
 
     def relative_pose(self):
         c = self.runner.client

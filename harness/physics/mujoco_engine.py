@@ -88,19 +88,21 @@ class MujocoRunner(BatchRunner):
     def __init__(self, protocol: Protocol | None = None, batch_size: int = 16, early_stop: bool = True):
         super().__init__(protocol or Protocol.of("mujoco"), batch_size, early_stop)
 
-    def _run_batch(self, batch: Sequence[Trial], frames: Path | None) -> list[TrialResult]:
+    def _run_batch(self, batch: Sequence[Trial], frames: Path | None, trace=None) -> list[TrialResult]:
         from harness.physics.frames import Frames
 
-        return [self.run_one(trial, Frames(frames) if frames is not None and k == 0 else None)
+        return [self.run_one(trial, Frames(frames) if frames is not None and k == 0 else None,
+                             trace if k == 0 else None)
                 for k, trial in enumerate(batch)]
 
-    def run_one(self, trial: Trial, camera=None) -> TrialResult:
+    def run_one(self, trial: Trial, camera=None, tracer=None) -> TrialResult:
         early = prechecked(trial)
         if early is not None:
             if camera is not None and early.outcome == "approach_collision":
                 camera.footprint(trial)
             return early
         slot = _Slot(self, trial, camera)
+        slot.tracer = tracer
         m, d, step = slot.model, slot.data, mujoco.mj_step
         # Closing: every step is checked, and the gripper's target holds still.
         while slot.result is None and slot.phase == "close":
@@ -275,6 +277,31 @@ class _Slot(TrialMachine):
             self._kinematics()
             self.camera.snapshot(name, self)
 
+    def poses(self):
+        self._kinematics()
+        d, palm = self.data, self.layout.palm
+        return (d.xpos[palm].copy(), d.xmat[palm].reshape(3, 3).copy(), d.xpos[self.obj].copy(),
+                d.xmat[self.obj].reshape(3, 3).copy())
+
+    def jaw_contacts(self):
+        """The contacts of the last step's collision (MuJoCo's contact list), by jaw body."""
+        from harness.physics.trace import pressure_centre
+
+        m, d = self.model, self.data
+        bodies = [int(m.geom_bodyid[g]) for g in self.jaw_geoms]
+        points, forces, force = ([], []), ([], []), np.zeros(6)
+        for k in range(d.ncon):
+            c = d.contact[k]
+            pair = (int(m.geom_bodyid[c.geom1]), int(m.geom_bodyid[c.geom2]))
+            if self.obj not in pair:
+                continue
+            for jaw, body in enumerate(bodies):
+                if body in pair:
+                    mujoco.mj_contactForce(m, d, k, force)
+                    points[jaw].append(c.pos.copy())
+                    forces[jaw].append(float(force[0]))
+        return [(len(points[j]), float(sum(forces[j])), pressure_centre(points[j], forces[j])) for j in range(2)]
+
 
 @lru_cache(maxsize=8)
 def _motion_arrays(p: Protocol) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray, np.ndarray]]:
@@ -295,6 +322,7 @@ class _Layout:
         self.model = m
         body, jnt = m.body, m.joint
         self.obj = body("object").id
+        self.palm = body("palm").id
         self.obj_qpos = int(m.jnt_qposadr[jnt("object").id])
         self.obj_dof = int(m.jnt_dofadr[jnt("object").id])
         self.palm_qpos = int(m.jnt_qposadr[jnt("palm").id])

@@ -201,19 +201,22 @@ class BatchRunner:
     def close(self) -> None:
         """Release what the engine holds (nothing by default)."""
 
-    def run(self, trials, frames: Path | None = None, progress=None) -> list[TrialResult]:
+    def run(self, trials, frames: Path | None = None, progress=None, trace=None) -> list[TrialResult]:
         """Outcomes of the trials, in order. ``frames``: a folder for PNG snapshots of
-        each phase of the first trial. ``progress`` is called with each batch's size."""
+        each phase of the first trial; ``trace``: a harness.physics.trace.Tracer that
+        records the first trial. ``progress`` is called with each batch's size."""
         results: list[TrialResult] = []
         for start in range(0, len(trials), self.batch_size):
             batch = trials[start:start + self.batch_size]
-            results.extend(self._run_batch(batch, Path(frames) if frames is not None and start == 0 else None))
+            results.extend(self._run_batch(batch, Path(frames) if frames is not None and start == 0 else None,
+                                           trace if start == 0 else None))
             if progress:
                 progress(len(batch))
         return results
 
-    def _run_batch(self, batch, frames: Path | None) -> list[TrialResult]:
-        """The batch's results; ``frames``: where the first trial's snapshots go, if anywhere."""
+    def _run_batch(self, batch, frames: Path | None, trace=None) -> list[TrialResult]:
+        """The batch's results; ``frames``: where the first trial's snapshots go, if
+        anywhere; ``trace``: the first trial's tracer, if any."""
         raise NotImplementedError
 
 
@@ -247,6 +250,7 @@ class TrialMachine:
         self.grip_width = math.nan
         self.closing_turn = math.nan
         self.grip_pose = None       # the object's orientation in the gripper when the jaws stalled
+        self.tracer = None          # a harness.physics.trace.Tracer recording this trial, or None
 
     # -- what an engine provides -----------------------------------------------------
 
@@ -284,6 +288,16 @@ class TrialMachine:
 
     def snapshot(self, name: str) -> None:
         """A frame of the trial named ``name``, when frames are being recorded."""
+
+    def poses(self):
+        """For a trace (harness.physics.trace): the gripper's and the object's frames in
+        the world, (gripper position (3,), rotation (3, 3), object position, rotation)."""
+        raise NotImplementedError
+
+    def jaw_contacts(self):
+        """For a trace: per jaw, (contact points, their total normal force (N), their
+        pressure centre (3,) in the world or None without points)."""
+        raise NotImplementedError
 
     # -- the protocol ------------------------------------------------------------------
 
@@ -341,6 +355,8 @@ class TrialMachine:
                 self.quiet = 0
             if self.result is None and self.tick >= self.phase_steps:
                 self._end_phase()
+            if self.tracer is not None:
+                self.tracer.record(self)
 
     def _after_closing_step(self) -> None:
         g, p = self.trial.gripper, self.protocol
@@ -359,6 +375,8 @@ class TrialMachine:
         self.closing_turn = wrap(self.object_height_and_yaw()[1] - self.start_yaw)
         self.snapshot("2-closed")
         self.grip_pose = self.relative_pose()
+        if self.tracer is not None:
+            self.tracer.record(self)
         if self.grip_width < p.held_distance or self.near_jaws(p.held_distance) < 2:
             self._fail("no_contact")
         if self.result is None:
