@@ -274,6 +274,29 @@ def test_the_base_follows_the_protocols_path_in_mujoco():
     assert math.isclose(shake[0, 2], slot.base_z + MUJOCO.lift_height)
 
 
+def test_the_study_rebuilds_a_disagreement_with_frames_and_traces(quick_runs, tmp_path):
+    """A posterior trial marked as held by one engine and lost by the other is re-run in
+    both from the run's config and plan: MuJoCo gives the run's own row for it (a trial's
+    row does not depend on its batch), and each engine's folder gets the four frames and
+    the trace, whose last check is where the re-run ended."""
+    from harness.bench.engines_study import write_frames
+    from harness.report import load
+
+    mj = pd.read_parquet(quick_runs / "mj1" / "trials.parquet")
+    picked = mj[mj.shapes == "posterior"].head(1)
+    trials = picked.rename(columns={"outcome": "outcome_b"}).assign(outcome_a="slipped")
+    out = write_frames(trials, load(quick_runs / "mj1"), tmp_path, count=1)
+    assert len(out) == 1
+    row = picked.iloc[0]
+    assert out[0]["rerun"]["mujoco"]["outcome"] == row.outcome
+    assert out[0]["rerun"]["mujoco"]["pivot"] == pytest.approx(row.pivot, abs=1e-12)
+    for engine in ("pybullet", "mujoco"):
+        folder = Path(out[0]["folder"]) / engine
+        assert len(list(folder.glob("*.png"))) == 4
+        trace = pd.read_csv(folder / "trace.csv")
+        assert trace["pivot"].iloc[-1] == pytest.approx(out[0]["rerun"][engine]["pivot"], abs=1e-12)
+
+
 def test_the_engines_study_reports_the_runs_own_counts(quick_runs, tmp_path):
     """bench engines' study of two runs: its trial agreement, per-planner success and
     plan count are the trials' own (recomputed here from the runs' parquet files), every

@@ -14,7 +14,7 @@ same, and trial i of a plan in one run is trial i of it in the other
 - the analytic P_F's and P_L's Spearman and Brier against each engine's success;
 - trial by trial: the share of equal outcomes and the cross-table of outcomes;
 - the lift model's bar sweeps (``bench lift``) in each engine;
-- frames from both engines of a few trials on which they disagree.
+- frames and traces from both engines of a few trials on which they disagree.
 """
 
 from __future__ import annotations
@@ -160,13 +160,14 @@ def _verdict(lo: float, hi: float) -> str:
 
 
 def write_frames(trials: pd.DataFrame, run: dict, folder: Path, count: int = FRAMED) -> list[dict]:
-    """Frames from both engines of the first ``count`` posterior trials held in one engine
-    and lost in the other (each way): the trial rebuilt from the run's config and plan
-    exactly as eval ran it (harness.pipeline)."""
+    """Frames and traces (trace.csv, harness.physics.trace) from both engines of the first
+    ``count`` posterior trials held in one engine and lost in the other (each way): the
+    trial rebuilt from the run's config and plan exactly as eval ran it (harness.pipeline)."""
     from harness import pipeline
     from harness.config import ExperimentConfig
     from harness.physics.simulate import make_trials
     from harness.physics.engines import make_runner
+    from harness.physics.trace import Tracer
     from harness.protocol import Protocol
     from harness.scene import load_scene
     from harness.settings import resolve
@@ -191,8 +192,10 @@ def write_frames(trials: pd.DataFrame, run: dict, folder: Path, count: int = FRA
             where = Path(folder) / f"{r.scene}-r{r.realisation}-{r.planner}-posterior-{r.trial}"
             seen = {}
             for engine in ENGINES:
+                tracer = Tracer()
                 with make_runner(Protocol.of(engine)) as runner:
-                    seen[engine] = runner.run(trial, frames=where / engine)[0].as_dict()
+                    seen[engine] = runner.run(trial, frames=where / engine, trace=tracer)[0].as_dict()
+                tracer.write(where / engine / "trace.csv")
             out.append({"trial": where.name, "folder": str(where), "recorded": [r.outcome_a, r.outcome_b],
                         "rerun": seen})
     return out
