@@ -3,9 +3,10 @@
 ``simulate --trace FILE`` records the first trial of the run, in either engine, at the
 end of closing and at every contact check of the lift, hold and shake (every
 ``check_interval``, 1/60 s): the phase and its step, the turn in the gripper and the rise
-the trial's result reports, how far the object has moved in the jaws, and each jaw's
-contact points (how many, the normal force they carry and where their pressure centre
-lies). Tracing only reads the engine's state: a traced trial's result is the same, bit
+the trial's result reports, how far the gripper itself has risen since the jaws stalled
+(it follows the protocol's path a few milliseconds behind), how far the object has moved
+in the jaws, and each jaw's contact points (how many, the normal force they carry and
+where their pressure centre lies). Tracing only reads the engine's state: a traced trial's result is the same, bit
 for bit, as untraced (tested).
 
 The slide is that of the *grip point*, the object point midway between the two jaws'
@@ -13,7 +14,8 @@ pressure centres when the jaws stalled, in the gripper's frame: ``across`` along
 closing axis, ``along`` the plates in the horizontal, ``up`` the vertical. An object
 held rigidly keeps it at 0; one that turns about the grasp axis through the grip point
 too; one that turns about another point, or slides down the plates, moves it (docs/lift.md,
-"What MuJoCo's contacts do on a turning sample"). A jaw's pressure centre is given
+"What MuJoCo's contacts do on a turning sample"). Without a contact point on each jaw when
+they stalled there is no grip point, and the slides are NaN. A jaw's pressure centre is given
 relative to the grip point in the same frame (its ``along`` and ``up``); it jumps when
 the engine's contact points move between the ends of a line contact.
 """
@@ -28,8 +30,7 @@ import numpy as np
 
 #: The columns of a trace, in order.
 COLUMNS = ("phase", "step", "time", "pivot", "rise", "gripper_rise", "slide_across", "slide_along", "slide_up",
-           "on_table",
-           "jaws_near", "jaw1_points", "jaw1_force", "jaw1_along", "jaw1_up",
+           "on_table", "jaws_near", "jaw1_points", "jaw1_force", "jaw1_along", "jaw1_up",
            "jaw2_points", "jaw2_force", "jaw2_along", "jaw2_up")
 
 
