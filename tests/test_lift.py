@@ -320,6 +320,38 @@ def test_a_handle_on_a_curved_wall_is_lifted_where_it_stops_clear_of_the_table(g
     assert result.lifted.mean() == pytest.approx(expected, abs=0.06)
 
 
+def test_the_off_axis_cases_put_the_centre_of_mass_off_the_grasp_axis_middle_or_not():
+    """bench lift's off-axis cases (docs/lift.md, "A clean case both engines lose"): the
+    L's foot moves the true outline's centre of mass along the closing axis by what the
+    parts' areas say (the disk, the handle beyond the disk's wall and the foot beyond the
+    handle's edge, by quadrature; within 2 % of the handle's width), the T's not at all,
+    at the same lever across the axis within 0.3 cm; both are gripped across the disk's
+    centre, on its curved wall, and every draw turns in the model."""
+    from scipy.integrate import quad
+
+    from harness.bench.lift_study import FOOTED_CASES, SIGMA_G, _exact_draws
+    from harness.physics.simulate import truth_polygon
+
+    ell, tee = FOOTED_CASES
+    assert not ell.centred and tee.centred and ell.feet == tee.feet
+    r, w, handle = ell.radius, ell.width, ell.handle
+    # The handle strip beyond the disk's wall: its area and moment about x = 0 (y-moment 0).
+    strip = quad(lambda y: r + handle - np.sqrt(r * r - y * y), -w / 2, w / 2)[0]
+    for foot in ell.feet:
+        beyond = foot * w  # the L's foot beyond the handle's edge, centred at w/2 + foot/2
+        area = np.pi * r * r + strip + beyond
+        expected = beyond * (w / 2 + foot / 2) / area
+        polygons = {c.centred: truth_polygon(c.scene(foot)) for c in FOOTED_CASES}
+        assert polygons[False].centroid.y == pytest.approx(expected, abs=0.02 * w)
+        assert abs(polygons[True].centroid.y) < 0.02 * w
+        assert polygons[True].centroid.x == pytest.approx(polygons[False].centroid.x, abs=5e-4)
+        assert polygons[True].area == pytest.approx(polygons[False].area, rel=0.01)
+    settings_scene = ell.scene(ell.feet[-1])
+    settings, _, draws = _exact_draws(settings_scene, 100, 0, "footed test")
+    result = evaluate_draws(ell.grasp(), draws, resolve(settings_scene, {"sigma_g": SIGMA_G}))
+    assert result.closure.mean() == 1.0 and result.pivots.mean() == 1.0
+
+
 def test_a_wedge_the_weight_turns_is_lost_where_a_square_head_hangs_clear():
     """bench lift's wedge with a handle (600 g at 10 N, so that the weight turns it on every
     draw), its hang 2.4 cm clear of the lifted table: with walls at a slope of 0.1 the

@@ -642,6 +642,97 @@ def hang_validate(bars=HANG_CASES, trials: int = 12, seed: int = 0, engine: str 
     return {"engine": engine, "time_step": protocol.time_step, "trials_per_length": trials, "rows": rows}
 
 
+@dataclass(frozen=True)
+class FootedDisk:
+    """The centre of mass off the middle of the contacts along the grasp axis (docs/lift.md,
+    "A clean case both engines lose"): a disk gripped across its centre (line contacts on
+    its curved wall), a handle along x (the turn's lever) and at the handle's end a foot
+    along the closing axis (y) of each length in ``feet``: from the handle's edge outward
+    (an L: the centre of mass moves off the contacts' middle along the grasp axis) or
+    centred on the handle (``centred``, a T: the control, the same area beyond the handle,
+    so the same weight and lever, and no offset along the axis). The density is fixed, so
+    the foot adds weight."""
+
+    centred: bool
+    handle: float = 0.08
+    density: float = 3000.0
+    friction: float = 0.5
+    force: float = 5.0
+    radius: float = 0.015
+    width: float = 0.012
+    thickness: float = 0.03
+    feet: tuple = (0.0, 0.02, 0.04, 0.06)
+
+    @property
+    def label(self) -> str:
+        return (f"{'T' if self.centred else 'L'}: disk r {self.radius * 1e3:g} mm, handle {self.handle * 100:g} cm, "
+                f"{self.thickness * 100:g} cm thick, {self.density:g} kg/m^3, mu {self.friction:g}, {self.force:g} N")
+
+    def parts(self, foot: float) -> list[dict]:
+        r, w = self.radius, self.width
+        parts = [{"type": "disk", "radius": r, "center": [0.0, 0.0]},
+                 {"type": "rectangle", "width": self.handle + 0.002, "height": w,
+                  "center": [r + self.handle / 2 - 0.001, 0.0]}]
+        if foot > 0:  # the L's overlaps the handle by 1 mm, so that the union is one piece;
+            # the T's spans the handle's width and foot / 2 beyond each edge: the same area
+            # beyond the handle as the L's, so the same weight and lever
+            height, y = (foot + w, 0.0) if self.centred else (foot + 0.002, w / 2 + foot / 2 - 0.001)
+            parts.append({"type": "rectangle", "width": w, "height": height, "center": [r + self.handle - w / 2, y]})
+        return parts
+
+    def scene(self, foot: float) -> Scene:
+        return _solid("footed", {"type": "union", "parts": self.parts(foot)}, self.thickness, self.density,
+                      self.friction, self.force, f"<{self.label}, foot {foot * 100:g} cm>", cells=100, extent=0.25)
+
+    def grasp(self) -> np.ndarray:
+        half = self.radius + CLEARANCE
+        return np.array([[0.0, -half], [0.0, half]])
+
+
+#: The L and its T control (docs/lift.md, "A clean case both engines lose").
+FOOTED_CASES = (FootedDisk(False), FootedDisk(True))
+
+
+def footed_validate(cases=FOOTED_CASES, trials: int = 24, seed: int = 0, engine: str = "pybullet") -> dict:
+    """Per case and foot: the centre of mass's lever across the grasp axis and its offset
+    along it (m, from the true outline), simulated success, the share of trials that
+    turned and the success of those, the outcomes, and P_L."""
+    rows = []
+    with make_runner(Protocol.of(engine)) as runner:
+        for case in cases:
+            points = []
+            for foot in case.feet:
+                scene = case.scene(foot)
+                settings, approach, draws = _exact_draws(scene, max(trials, ANALYTIC_DRAWS), seed, "footed",
+                                                         case.label, int(round(foot * 1e3)))
+                polygon = truth_polygon(scene)
+                results = runner.run(make_trials(settings, case.grasp(), [polygon], approach[:trials]))
+                turned = [r for r in results if r.pivot > TURNED]
+                centre = polygon.centroid
+                points.append({"foot": foot, "lever": float(centre.x), "axial": float(centre.y),
+                               "success": float(np.mean([r.outcome == "success" for r in results])),
+                               "turned": len(turned) / len(results),
+                               "turned_success": (float(np.mean([r.outcome == "success" for r in turned]))
+                                                  if turned else None),
+                               "outcomes": dict(Counter(r.outcome for r in results)),
+                               "p_l": float(evaluate_draws(case.grasp(), draws, settings).lifted.mean())})
+            rows.append({"case": case.label, "points": points})
+    return {"engine": engine, "trials_per_foot": trials, "rows": rows}
+
+
+def _footed_lines(res: dict) -> list[str]:
+    lines = [f"off-axis cases ({res['engine']}, {res['trials_per_foot']} trials per foot): a disk gripped across "
+             f"its centre, a handle, a foot along the closing axis (L) or across the handle's end (T); per foot "
+             f"(cm): the centre of mass's offset along the grasp axis (cm), success, turned, P_L"]
+    for r in res["rows"]:
+        lines.append(f"  {r['case']}:")
+        for p in r["points"]:
+            fails = ", ".join(f"{k} {v}" for k, v in sorted(p["outcomes"].items()) if k != "success")
+            lines.append(f"    foot {p['foot'] * 100:3.0f}  offset {p['axial'] * 100:4.1f}  success {p['success']:4.2f}"
+                         f"  turned {p['turned']:4.2f}  P_L {p['p_l']:4.2f}" + (f"  ({fails})" if fails else ""))
+    return lines
+
+
 def crossing(offsets, values) -> float | None:
     """Where ``values`` first falls through 0.5 along ``offsets`` (linear between the two
     offsets around the fall), or None when it never does."""
@@ -749,7 +840,8 @@ class Settings:
 def benchmark(settings: Settings = Settings()) -> dict:
     """The bar sweeps (where P_L and simulated success fall through 0.5) and the friction
     levers of Bullet's contact manifolds on the library trial set; the bar sweeps again
-    in MuJoCo."""
+    in MuJoCo; and the other controlled cases (slides, pushes, hangs, loads, the off-axis
+    L and T) in both engines."""
     return {**validate(trials=settings.trials, seed=settings.seed),
             "slide": validate(SLIDES, trials=settings.trials, seed=settings.seed),
             "push": validate(PUSHES, trials=settings.trials, seed=settings.seed),
@@ -758,12 +850,14 @@ def benchmark(settings: Settings = Settings()) -> dict:
             "ends": hang_validate(END_CASES, trials=settings.trials, seed=settings.seed),
             "manifold_levers": manifold_levers(seed=settings.seed),
             "loads": load_validate(trials=settings.trials, seed=settings.seed),
+            "footed": footed_validate(seed=settings.seed),
             "mujoco": {**validate(trials=settings.trials, seed=settings.seed, engine="mujoco"),
                        "slide": validate(SLIDES, trials=settings.trials, seed=settings.seed, engine="mujoco"),
                        "push": validate(PUSHES, trials=settings.trials, seed=settings.seed, engine="mujoco"),
                        "hang": hang_validate(trials=settings.trials, seed=settings.seed, engine="mujoco"),
                        "ends": hang_validate(END_CASES, trials=settings.trials, seed=settings.seed, engine="mujoco"),
-                       "loads": load_validate(trials=settings.trials, seed=settings.seed, engine="mujoco")}}
+                       "loads": load_validate(trials=settings.trials, seed=settings.seed, engine="mujoco"),
+                       "footed": footed_validate(seed=settings.seed, engine="mujoco")}}
 
 
 def format_lines(res: dict) -> list[str]:
@@ -782,6 +876,8 @@ def format_lines(res: dict) -> list[str]:
                  f"0.75), {m['single_point']:.0%} held by one point, {m['beyond_largest']:.1%} beyond the largest")
     if "loads" in res:
         lines += _load_lines(res["loads"])
+    if "footed" in res:
+        lines += _footed_lines(res["footed"])
     if "mujoco" in res:
         lines += ["", "the same bars in MuJoCo:", *_bar_lines(res["mujoco"])]
         if "slide" in res["mujoco"]:
@@ -793,6 +889,8 @@ def format_lines(res: dict) -> list[str]:
                 lines += _hang_lines(res["mujoco"][key])
         if "loads" in res["mujoco"]:
             lines += _load_lines(res["mujoco"]["loads"])
+        if "footed" in res["mujoco"]:
+            lines += _footed_lines(res["mujoco"]["footed"])
     return lines
 
 
