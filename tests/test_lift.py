@@ -530,6 +530,20 @@ def test_the_load_cases_lines_give_every_force_of_every_case():
     assert "success 1.00" in lines[3] and "(" not in lines[3]
 
 
+def test_the_off_axis_lines_print_each_foot():
+    from harness.bench.lift_study import _footed_lines
+
+    point = {"foot": 0.06, "lever": 0.049, "axial": 0.011, "success": 0.33, "turned": 1.0, "turned_success": 0.33,
+             "outcomes": {"success": 8, "slipped": 11, "dropped": 5}, "p_l": 1.0}
+    res = {"engine": "mujoco", "trials_per_foot": 24,
+           "rows": [{"case": "L: disk", "points": [{**point, "foot": 0.0, "axial": 0.0, "success": 1.0,
+                                                     "outcomes": {"success": 24}}, point]}]}
+    lines = _footed_lines(res)
+    assert len(lines) == 4 and "mujoco, 24 trials per foot" in lines[0] and lines[1] == "  L: disk:"
+    assert "foot   0  offset  0.0  success 1.00" in lines[2] and "(" not in lines[2]
+    assert "foot   6  offset  1.1  success 0.33" in lines[3] and "(dropped 5, slipped 11)" in lines[3]
+
+
 def test_the_rounded_end_cases_are_capsules_of_the_bars_mass_gripped_on_or_beside_the_arc():
     """bench lift's end cases: a rounded bar is a capsule of the bar's length and width,
     whose area is (L - w) w + pi (w / 2)^2 (to 0.2 %, the arcs drawn as polygons) and whose
