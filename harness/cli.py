@@ -161,13 +161,15 @@ def _quality(args) -> int:
     if args.json:
         out = est.as_dict() | {"scene": scene.name, "grasp": {"g1": list(grasp.g1), "g2": list(grasp.g2)},
                                "sigma_g": settings.sigma_g, "friction": settings.friction,
-                               "friction_spread": settings.friction_spread, "seed": args.seed}
+                               "friction_spread": settings.friction_spread, "force": settings.force,
+                               "seed": args.seed}
         print(json.dumps(out))
     else:
         fails = ", ".join(f"{k} {v}" for k, v in est.failures.items())
         print(f"{scene.name}: P_F = {est.p_f:.3f} (95% CI {est.ci_low:.3f} to {est.ci_high:.3f}), "
               f"P_L = {est.p_l:.3f} (95% CI {est.p_l_ci_low:.3f} to {est.p_l_ci_high:.3f}) over "
-              f"{est.samples} draws, sigma_g = {settings.sigma_g:g} m, friction = {settings.friction:g}")
+              f"{est.samples} draws, sigma_g = {settings.sigma_g:g} m, friction = {settings.friction:g}, "
+              f"force = {settings.force:g} N")
         print(f"failures: {fails}; the plates' squeeze settled {est.squeezed} draws out of force closure; "
               f"the weight turned the object in {est.pivots} draws; "
               f"mean Ferrari-Canny quality {est.ferrari_canny_mean:.4f}")
@@ -212,12 +214,13 @@ def _simulate(args) -> int:
         print(json.dumps(out | {"scene": scene.name, "grasp": {"g1": list(grasp.g1), "g2": list(grasp.g2)},
                                 "shapes": args.shapes, "engine": args.engine, "sigma_g": settings.sigma_g,
                                 "friction": settings.friction, "friction_spread": settings.friction_spread,
+                                "force": settings.force,
                                 "seed": args.seed}))
     else:
         counts = ", ".join(f"{k} {v}" for k, v in out["outcomes"].items() if v)
         print(f"{scene.name} ({args.shapes}): success {out['successes']}/{out['trials']} = "
               f"{out['success_rate']:.3f} (95% CI {out['ci_low']:.3f} to {out['ci_high']:.3f}), "
-              f"sigma_g = {settings.sigma_g:g} m, friction = {settings.friction:g}")
+              f"sigma_g = {settings.sigma_g:g} m, friction = {settings.friction:g}, force = {settings.force:g} N")
         print(f"outcomes: {counts}; {out['trials_per_s']:.1f} trials/s in {args.engine}")
         if args.frames:
             print(f"frames of the first trial in {args.frames}")
@@ -320,11 +323,12 @@ def _key_value(text: str) -> tuple[str, str]:
 
 
 def _settings(args, scene):
-    """The scene's grasp settings with the command line's --sigma-g, --friction and
-    --friction-spread where given."""
+    """The scene's grasp settings with the command line's --sigma-g, --friction,
+    --friction-spread and --force where given."""
     from harness.settings import override_problem, resolve
 
-    options = {"sigma_g": args.sigma_g, "friction": args.friction, "friction_spread": args.friction_spread}
+    options = {"sigma_g": args.sigma_g, "friction": args.friction, "friction_spread": args.friction_spread,
+               "force": args.force}
     given = {k: v for k, v in options.items() if v is not None}
     for key, value in given.items():
         problem = override_problem(key, value)
@@ -352,7 +356,7 @@ def _plan(args) -> int:
            "estimate": row["estimate"], "plan_time_s": row["plan_time_s"], "iterations": row["iterations"],
            "evaluations": row["evaluations"], "p_f": None, "ci_low": None, "ci_high": None, "p_l": None,
            "p_l_ci_low": None, "p_l_ci_high": None, "sigma_g": settings.sigma_g, "friction": settings.friction,
-           "params": planner.get_params(), "message": row["message"]}
+           "force": settings.force, "params": planner.get_params(), "message": row["message"]}
     if row["executed"]:  # judged on the evaluation draws every planner shares at this seed
         analytic = pipeline.analytic_row(cell, row, pipeline.DRAWS, 0)
         out.update({k: analytic[k] for k in ("p_f", "ci_low", "ci_high", "p_l", "p_l_ci_low", "p_l_ci_high")})
@@ -443,7 +447,7 @@ _GRASP = {"nargs": 4, "type": _coordinate, "required": True, "metavar": ("X1", "
 
 
 def _add_problem_options(p: argparse.ArgumentParser) -> None:
-    """--seed, --sigma-g, --friction and --friction-spread, shared by plan, quality and simulate."""
+    """--seed, --sigma-g, --friction, --friction-spread and --force, shared by plan, quality and simulate."""
     p.add_argument("--seed", type=_seed, default=0, help="experiment seed (default 0)")
     p.add_argument("--sigma-g", type=_non_negative, default=None,
                    help="approach noise std per jaw start, metres (default: the scene's gripper.sigma_g)")
@@ -451,6 +455,8 @@ def _add_problem_options(p: argparse.ArgumentParser) -> None:
                    help="jaw-object friction coefficient (default: the scene's physics.friction)")
     p.add_argument("--friction-spread", type=_non_negative, default=None,
                    help="std of the friction coefficient across draws (default 0)")
+    p.add_argument("--force", type=float, default=None, metavar="NEWTONS",
+                   help="the gripper's grip force, N (default: the scene's gripper.force)")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -38,7 +38,10 @@ def test_bad_command_line_gets_one_line_and_exit_code_2(capsys):
                  ["quality", "disk", "--grasp", "-0.3", "0", "0", "0"],  # outside the grid
                  ["quality", "disk", "--grasp", "0", "0", "0"], ["quality", "disk", "--grasp", "0", "0", "0", "x"],
                  ["quality", "disk", "--grasp", "-0.04", "0", "0.04", "0", "--sigma-g", "-1"],
-                 ["quality", "disk", "--grasp", "-0.04", "0", "0.04", "0", "--samples", "0"]):
+                 ["quality", "disk", "--grasp", "-0.04", "0", "0.04", "0", "--samples", "0"],
+                 ["quality", "disk", "--grasp", "-0.04", "0", "0.04", "0", "--force", "0"],
+                 ["quality", "disk", "--grasp", "-0.04", "0", "0.04", "0", "--force", "nan"],
+                 ["simulate", "disk", "--grasp", "-0.04", "0", "0.04", "0", "--force", "-5"]):
         assert main(argv) == 2, argv
         err = capsys.readouterr().err
         assert len(err.strip().splitlines()) == 1 and err.startswith("gpis-harness: error: "), (argv, err)
@@ -120,6 +123,23 @@ def test_simulate_prints_the_json_contract_and_writes_frames(tmp_path, capsys):
     pictures = sorted(p.name for p in frames.glob("*.png"))
     assert pictures == ["1-placed.png", "2-closed.png", "3-lifted.png", "4-shaken.png"]
     assert all((frames / p).read_bytes()[:4] == b"\x89PNG" for p in pictures)
+
+
+def test_force_overrides_the_scenes_grip_in_quality_and_simulate(capsys):
+    """--force sets the grip: the rectangle (6 x 3 x 3 cm, 400 kg/m^3: 0.21 N) gripped
+    through its centre with mu 0.5 is lifted at the scene's 20 N and slides out at 0.1 N,
+    where the plates' friction 2 mu N = 0.1 N is less than its weight: P_L 1 and 0, and
+    in the simulator success and `slipped`; the JSON reports the force used."""
+    grasp = ["--grasp", "0", "-0.03", "0", "0.03", "--sigma-g", "0"]
+    for force, p_l in ((None, 1.0), (0.1, 0.0)):
+        extra = [] if force is None else ["--force", str(force)]
+        assert main(["quality", "rectangle", *grasp, "--samples", "50", "--json", *extra]) == 0
+        out = json.loads(capsys.readouterr().out)
+        assert out["force"] == (20.0 if force is None else force) and out["p_l"] == p_l
+        assert main(["simulate", "rectangle", *grasp, "--trials", "1", "--shapes", "truth", "--json", *extra]) == 0
+        out = json.loads(capsys.readouterr().out)
+        assert out["force"] == (20.0 if force is None else force)
+        assert out["outcomes"]["success" if force is None else "slipped"] == 1
 
 
 def test_simulate_bad_input_gets_one_line_and_exit_code_2(tmp_path, capsys):
