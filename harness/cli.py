@@ -224,8 +224,11 @@ def _simulate(args) -> int:
         print(f"outcomes: {counts}; {out['trials_per_s']:.1f} trials/s in {args.engine}")
         if args.frames:
             print(f"frames of the first trial in {args.frames}")
-        if args.trace:
+        if args.trace and tracer.rows:
             print(f"the first trial's trace in {args.trace} ({len(tracer.rows)} checks)")
+        elif args.trace:
+            print(f"the first trial ended {results[0].outcome} before its jaws closed: its trace in "
+                  f"{args.trace} has no rows")
     return 0
 
 

@@ -83,6 +83,12 @@ def test_simulate_writes_the_trace_as_csv(tmp_path, capsys):
         rows = list(csv.DictReader(f))
     assert tuple(rows[0]) == COLUMNS and len(rows) > 60
     assert rows[0]["phase"] == "close" and rows[-1]["phase"] == "shake"
+    # Jaws placed inside the rectangle: decided before simulating, the trace has no rows.
+    assert main(["simulate", "rectangle", "--grasp", "0", "-0.01", "0", "0.03", "--trials", "1", "--shapes",
+                 "truth", "--sigma-g", "0", "--trace", str(out)]) == 0
+    assert "ended approach_collision before its jaws closed" in capsys.readouterr().out
+    with open(out) as f:
+        assert list(csv.DictReader(f)) == [] and f.seek(0) == 0 and f.readline().strip() == ",".join(COLUMNS)
 
 
 @pytest.mark.parametrize("engine", ENGINES)
