@@ -574,3 +574,49 @@ def test_the_rounded_end_cases_are_capsules_of_the_bars_mass_gripped_on_or_besid
             assert 0.2 < edge < 0.8, edge
         else:
             assert edge < 0.01, edge
+
+
+def test_the_squeeze_cases_grip_the_bar_through_its_centre_on_its_ends_corners_or_sides():
+    """bench lift's squeeze cases (docs/lift.md, "The squeeze's limit on the calibration
+    rectangle"): the jaws start outside the bar on a line through its centre at each
+    angle to its length; their first contacts (marched on the true field, 5 mm cells) lie
+    on the line (across it within a plate's half-width) and on the bar's ends (normals
+    along its length within 0.05) up to 10 degrees, on its corners from 20 to 35 degrees
+    (the diagonal is at 26.6 degrees for 6 x 3 cm, and a 1 cm plate reaches the corner
+    before it), and on its long sides from 40 degrees on."""
+    from harness.bench.lift_study import SQUEEZES
+
+    light, heavy = SQUEEZES
+    assert light.bar.length == heavy.bar.length == 0.06 and light.bar.width == 0.03
+    assert heavy.mass == pytest.approx(8 * light.mass) and light.mass == pytest.approx(0.054)
+    scene = light.scene()
+    fields = SDFBatch(scene.grid, scene.true_sdf[None], scene.true_sdf_gradient[None])
+    seen = set()
+    for angle in light.offsets():
+        g = light.grasp(angle)
+        assert np.allclose(g[0] + g[1], 0.0)  # through the centre
+        u = (g[1] - g[0]) / np.linalg.norm(g[1] - g[0])
+        assert math.degrees(math.atan2(u[1], u[0])) == pytest.approx(angle)
+        assert np.linalg.norm(g[0]) > 0.5 * math.hypot(0.06, 0.03)  # outside the bar
+        c = find_contacts(fields, g[:1], g[1:], 0.01)
+        where = "ends" if angle <= 10 else "corners" if angle <= 35 else "sides"
+        seen.add(where)
+        for point, normal in ((c.c1[0], c.n1[0]), (c.c2[0], c.n2[0])):
+            assert abs(point[0] * u[1] - point[1] * u[0]) <= 0.005 + 1e-3
+            if where != "corners":
+                k, half = (0, 0.03) if where == "ends" else (1, 0.015)
+                assert abs(normal[k]) == pytest.approx(1.0, abs=0.05) and abs(point[k]) == pytest.approx(half, abs=1e-3)
+            else:
+                assert abs(point[0]) > 0.029 and abs(point[1]) > 0.013 and min(abs(normal)) > 0.2
+    assert seen == {"ends", "corners", "sides"}
+
+
+def test_the_squeeze_lines_print_each_angle():
+    from harness.bench.lift_study import _squeeze_lines
+
+    points = [{"offset": a, "success": 1.0, "p_l": p, "p_f": f} for a, p, f in ((0.0, 1.0, 1.0), (40.0, 0.0, 0.0))]
+    res = {"engine": "pybullet", "trials_per_offset": 16, "analytic_draws": 400,
+           "rows": [{"bar": "bar 6 x 3", "points": points}]}
+    lines = _squeeze_lines(res)
+    assert len(lines) == 2 and "through the centre at 0, 40 degrees" in lines[0] and "16 trials" in lines[0]
+    assert lines[1] == "  bar 6 x 3: 1.00/1.00/1.00  1.00/0.00/0.00"

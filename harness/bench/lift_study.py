@@ -198,6 +198,47 @@ PUSHES = tuple(PushCase(alpha, offset, Bar(0.08, density, 0.5, 20.0, width=0.006
 
 
 @dataclass(frozen=True)
+class SqueezeCase:
+    """The squeeze's controlled case (docs/lift.md, "The squeeze"): a bar gripped through
+    its centre along a line at an angle (degrees) to its length, the calibration
+    rectangle's grasp turned. The 1 cm plates meet its ends up to about 10 degrees, its
+    corners around the diagonal (26.6 degrees for 6 x 3 cm) and its long sides from about
+    40 degrees; where a side's wall lies beyond the friction cone the plates' couple turns
+    the bar on the table (harness.squeeze) towards the nearest local minimum of its width,
+    flush with its sides, so the turn the squeeze needs is largest just past the corners
+    (both engines turn it 37-46 degrees from 40). The sweep's 'offset' is the angle."""
+
+    bar: Bar
+
+    @property
+    def label(self) -> str:
+        return f"bar {self.bar.label}, {self.mass * 1000:.0f} g, through its centre"
+
+    @property
+    def mass(self) -> float:
+        return self.bar.mass
+
+    def scene(self) -> Scene:
+        return self.bar.scene()
+
+    def offsets(self) -> np.ndarray:
+        """The angles (degrees) to the bar's length."""
+        return np.array([0.0, 10.0, 20.0, 25.0, 30.0, 35.0, 40.0, 45.0, 50.0, 60.0, 70.0, 90.0])
+
+    def grasp(self, angle: float) -> np.ndarray:
+        a = math.radians(angle)
+        reach = 0.5 * math.hypot(self.bar.length, self.bar.width) + CLEARANCE
+        u = np.array([math.cos(a), math.sin(a)])
+        return np.array([-reach * u, reach * u])
+
+
+#: The squeeze's controlled cases: the calibration rectangle's 6 x 3 cm (3 cm thick,
+#: friction 0.5, a cone of 26.6 degrees, 20 N), light (54 g) and heavy (430 g, 8000
+#: kg/m^3: the table's friction against the plates' couple grows with the weight).
+SQUEEZES = tuple(SqueezeCase(Bar(0.06, density, 0.5, 20.0)) for density in (1000.0, 8000.0))
+
+
+@dataclass(frozen=True)
 class LoadCase:
     """An object gripped where its weight has no torque about the grasp axis, at falling
     grip forces, for the two loads the model leaves out (docs/lift.md, "What it does not
@@ -840,11 +881,12 @@ class Settings:
 def benchmark(settings: Settings = Settings()) -> dict:
     """The bar sweeps (where P_L and simulated success fall through 0.5) and the friction
     levers of Bullet's contact manifolds on the library trial set; the bar sweeps again
-    in MuJoCo; and the other controlled cases (slides, pushes, hangs, loads, the off-axis
+    in MuJoCo; and the other controlled cases (slides, pushes, squeezes, hangs, loads, the off-axis
     L and T) in both engines."""
     return {**validate(trials=settings.trials, seed=settings.seed),
             "slide": validate(SLIDES, trials=settings.trials, seed=settings.seed),
             "push": validate(PUSHES, trials=settings.trials, seed=settings.seed),
+            "squeeze": validate(SQUEEZES, trials=settings.trials, seed=settings.seed),
             "hang": hang_validate(trials=settings.trials, seed=settings.seed),
             "hang_fine": hang_validate(trials=settings.trials, seed=settings.seed, finer=HANG_FINER),
             "ends": hang_validate(END_CASES, trials=settings.trials, seed=settings.seed),
@@ -854,6 +896,7 @@ def benchmark(settings: Settings = Settings()) -> dict:
             "mujoco": {**validate(trials=settings.trials, seed=settings.seed, engine="mujoco"),
                        "slide": validate(SLIDES, trials=settings.trials, seed=settings.seed, engine="mujoco"),
                        "push": validate(PUSHES, trials=settings.trials, seed=settings.seed, engine="mujoco"),
+                       "squeeze": validate(SQUEEZES, trials=settings.trials, seed=settings.seed, engine="mujoco"),
                        "hang": hang_validate(trials=settings.trials, seed=settings.seed, engine="mujoco"),
                        "ends": hang_validate(END_CASES, trials=settings.trials, seed=settings.seed, engine="mujoco"),
                        "loads": load_validate(trials=settings.trials, seed=settings.seed, engine="mujoco"),
@@ -866,6 +909,8 @@ def format_lines(res: dict) -> list[str]:
         lines += _slide_lines(res["slide"])
     if "push" in res:
         lines += _slide_lines(res["push"], "push cases", "pushes of")
+    if "squeeze" in res:
+        lines += _squeeze_lines(res["squeeze"])
     for key in ("hang", "hang_fine", "ends"):
         if key in res:
             lines += _hang_lines(res[key])
@@ -884,6 +929,8 @@ def format_lines(res: dict) -> list[str]:
             lines += _slide_lines(res["mujoco"]["slide"])
         if "push" in res["mujoco"]:
             lines += _slide_lines(res["mujoco"]["push"], "push cases", "pushes of")
+        if "squeeze" in res["mujoco"]:
+            lines += _squeeze_lines(res["mujoco"]["squeeze"])
         for key in ("hang", "ends"):
             if key in res["mujoco"]:
                 lines += _hang_lines(res["mujoco"][key])
@@ -944,6 +991,19 @@ def _slide_lines(res: dict, title: str = "slide cases", what: str = "the jaws' l
     lines = [f"{title} ({res['engine']}): {what} {offsets} {where}, "
              f"{res['trials_per_offset']} trials and {res['analytic_draws']} analytic draws per offset: "
              f"success / P_L / P_F"]
+    for r in res["rows"]:
+        lines.append(f"  {r['bar']}: " + "  ".join(f"{p['success']:.2f}/{p['p_l']:.2f}/{p['p_f']:.2f}"
+                                                    for p in r["points"]))
+    return lines
+
+
+def _squeeze_lines(res: dict) -> list[str]:
+    """Per squeeze case and angle (degrees to the bar's length): simulated success, P_L
+    and P_F (force closure at the first contacts, before any push or squeeze)."""
+    angles = ", ".join(f"{p['offset']:g}" for p in res["rows"][0]["points"])
+    lines = [f"squeeze cases ({res['engine']}): the jaws' line through the centre at {angles} degrees to the "
+             f"bar's length, {res['trials_per_offset']} trials and {res['analytic_draws']} analytic draws per "
+             f"angle: success / P_L / P_F"]
     for r in res["rows"]:
         lines.append(f"  {r['bar']}: " + "  ".join(f"{p['success']:.2f}/{p['p_l']:.2f}/{p['p_f']:.2f}"
                                                     for p in r["points"]))
