@@ -24,7 +24,11 @@ SQUEEZE_STEP = math.radians(2.0)
 #: the squeeze leaves out: at 90 degrees, mean-shape-lift on make eval moved to grasps
 #: that need large squeezes and lost them (success 0.989 -> 0.937; the stapler 0 of 40),
 #: while both engines squeeze a light pushed bar 37 degrees flush (docs/lift.md, "The
-#: push").
+#: push"). Its cost, measured (docs/lift.md, "The squeeze's limit on the calibration
+#: rectangle"): the calibration bar gripped through its centre 40-50 degrees off its length
+#: is squeezed flush by both engines and kept, where the limit gives P_L 0.00-0.81; at 90
+#: degrees make eval's lift planners move to long squeezes on posterior bodies, which
+#: Bullet stops short (gp-gpis-opt-lift 0.997 -> 0.966, P_L's Spearman 0.623 -> 0.565).
 SQUEEZE_LIMIT = math.radians(20.0)
 #: During the squeeze each plate looks for the surface from this far (m) outside its last
 #: contact: a 2 degree turn moves the wall under a 10 mm plate by well under 1 mm.
