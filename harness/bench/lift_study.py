@@ -983,13 +983,16 @@ def _bar_lines(res: dict) -> list[str]:
     return lines
 
 
-def _slide_lines(res: dict, title: str = "slide cases", what: str = "the jaws' line") -> list[str]:
-    """Per slide (or push) case and offset (or push, mm): simulated success, P_L and P_F
-    (force closure at the first contacts, before any push or squeeze)."""
-    offsets = ", ".join(f"{p['offset'] * 1e3:g}" for p in res["rows"][0]["points"])
-    where = "mm off the centre" if title == "slide cases" else "mm"
+def _slide_lines(res: dict, title: str = "slide cases", what: str = "the jaws' line", where: str = "",
+                 scale: float = 1e3, per: str = "offset") -> list[str]:
+    """Per slide, push or squeeze case and offset (mm; the push, mm; the angle, degrees):
+    simulated success, P_L and P_F (force closure at the first contacts, before any push or
+    squeeze). ``where`` names the offsets' unit (default: mm off the centre for the slide
+    cases, mm otherwise) and ``scale`` converts them from the results' units."""
+    offsets = ", ".join(f"{p['offset'] * scale:g}" for p in res["rows"][0]["points"])
+    where = where or ("mm off the centre" if title == "slide cases" else "mm")
     lines = [f"{title} ({res['engine']}): {what} {offsets} {where}, "
-             f"{res['trials_per_offset']} trials and {res['analytic_draws']} analytic draws per offset: "
+             f"{res['trials_per_offset']} trials and {res['analytic_draws']} analytic draws per {per}: "
              f"success / P_L / P_F"]
     for r in res["rows"]:
         lines.append(f"  {r['bar']}: " + "  ".join(f"{p['success']:.2f}/{p['p_l']:.2f}/{p['p_f']:.2f}"
@@ -998,16 +1001,9 @@ def _slide_lines(res: dict, title: str = "slide cases", what: str = "the jaws' l
 
 
 def _squeeze_lines(res: dict) -> list[str]:
-    """Per squeeze case and angle (degrees to the bar's length): simulated success, P_L
-    and P_F (force closure at the first contacts, before any push or squeeze)."""
-    angles = ", ".join(f"{p['offset']:g}" for p in res["rows"][0]["points"])
-    lines = [f"squeeze cases ({res['engine']}): the jaws' line through the centre at {angles} degrees to the "
-             f"bar's length, {res['trials_per_offset']} trials and {res['analytic_draws']} analytic draws per "
-             f"angle: success / P_L / P_F"]
-    for r in res["rows"]:
-        lines.append(f"  {r['bar']}: " + "  ".join(f"{p['success']:.2f}/{p['p_l']:.2f}/{p['p_f']:.2f}"
-                                                    for p in r["points"]))
-    return lines
+    """The squeeze cases' lines: :func:`_slide_lines` over angles (degrees)."""
+    return _slide_lines(res, "squeeze cases", "the jaws' line through the centre at", "degrees to the bar's length",
+                        scale=1.0, per="angle")
 
 
 def _hang_lines(res: dict) -> list[str]:
