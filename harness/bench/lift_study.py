@@ -1,9 +1,11 @@
 """The lift model against the physics (``gpis-harness bench lift``): bars gripped across
 their width at growing offsets from their centre of mass, where the analytic P_L and the
 simulated success fall through 0.5; hang bars, which the weight turns in the plates, at
-growing lengths, where success falls as their hang nears the lifted table; two loads
-the model leaves out, at falling grip forces (LoadCase); and the friction levers
-Bullet's contact manifolds give the jaw plates on the library's trial set.
+growing lengths, where success falls as their hang nears the lifted table; the
+calibration rectangle's bar gripped through its centre at 0-90 degrees to its length,
+where the plates squeeze it flush (SqueezeCase); two loads the model leaves out, at
+falling grip forces (LoadCase); and the friction levers Bullet's contact manifolds give
+the jaw plates on the library's trial set.
 
 A bar is a fully observed rectangle (its true shape: no shape uncertainty), so the
 offset is the only thing that changes along a sweep. Trials and the analytic estimate
@@ -199,9 +201,9 @@ PUSHES = tuple(PushCase(alpha, offset, Bar(0.08, density, 0.5, 20.0, width=0.006
 
 @dataclass(frozen=True)
 class SqueezeCase:
-    """The squeeze's controlled case (docs/lift.md, "The squeeze"): a bar gripped through
-    its centre along a line at an angle (degrees) to its length, the calibration
-    rectangle's grasp turned. The 1 cm plates meet its ends up to about 10 degrees, its
+    """The squeeze's controlled case (docs/lift.md, "The squeeze's limit on the calibration
+    rectangle"): a bar gripped through its centre along a line at an angle (degrees) to its
+    length, the calibration rectangle's grasp turned. The 1 cm plates meet its ends up to about 10 degrees, its
     corners around the diagonal (26.6 degrees for 6 x 3 cm) and its long sides from about
     40 degrees; where a side's wall lies beyond the friction cone the plates' couple turns
     the bar on the table (harness.squeeze) towards the nearest local minimum of its width,
@@ -233,7 +235,7 @@ class SqueezeCase:
 
 
 #: The squeeze's controlled cases: the calibration rectangle's 6 x 3 cm (3 cm thick,
-#: friction 0.5, a cone of 26.6 degrees, 20 N), light (54 g) and heavy (430 g, 8000
+#: friction 0.5, a cone of 26.6 degrees, 20 N), light (54 g) and heavy (432 g, 8000
 #: kg/m^3: the table's friction against the plates' couple grows with the weight).
 SQUEEZES = tuple(SqueezeCase(Bar(0.06, density, 0.5, 20.0)) for density in (1000.0, 8000.0))
 
