@@ -323,17 +323,57 @@ def retest_spearman(post: pd.DataFrame, repeats: int = RETEST_SPLITS, seed: int 
     return 2.0 * r / (1.0 + r) if r > -1.0 else math.nan
 
 
+def _plans_with_rates(data: dict) -> pd.DataFrame:
+    """The executed plans with their analytic estimates and their posterior trials'
+    successes (``sum``) and count."""
+    plans = data["plans"][data["plans"].executed == 1]
+    rate = plan_rates(data["trials"][data["trials"].shapes == "posterior"]).reset_index()
+    return plans.merge(data["analytic"], on=["scene", "realisation", "planner"]).merge(
+        rate, on=["scene", "realisation", "planner"])
+
+
+def rank_shares(forecast, success) -> tuple[np.ndarray, float]:
+    """Each plan's share of the shortfall of Spearman's rho from 1, and rho. Spearman's rho
+    is Pearson's correlation of the average ranks, so with z the ranks standardised (sample
+    standard deviation) rho = 1 - sum((z_forecast - z_success)^2) / (2 (n - 1)) exactly,
+    ties included: a plan's share is its squared difference over their sum. NaN shares
+    (and rho) where either side is constant or there are fewer than three plans."""
+    f, s = np.asarray(forecast, dtype=float), np.asarray(success, dtype=float)
+    n = len(f)
+    if n < 3 or np.ptp(f) == 0 or np.ptp(s) == 0:
+        return np.full(n, np.nan), float("nan")
+    z = [(r - r.mean()) / r.std(ddof=1) for r in (stats.rankdata(f), stats.rankdata(s))]
+    squared = (z[0] - z[1]) ** 2
+    total = squared.sum()
+    shares = squared / total if total > 0 else np.zeros(n)
+    return shares, float(1.0 - total / (2 * (n - 1)))
+
+
+def plan_calibration(data: dict) -> pd.DataFrame:
+    """Per executed plan: its analytic P_F and P_L, its posterior trials and their success,
+    and per metric the plan's share of the pooled Spearman's shortfall from 1
+    (:func:`rank_shares`): which plans cost the ranking of calibration.csv's 'all' row."""
+    per_plan = _plans_with_rates(data)
+    out = per_plan[["scene", "realisation", "planner", *METRICS]].copy()
+    out["trials"] = per_plan["count"].astype(int)
+    out["success_rate"] = per_plan["sum"] / per_plan["count"]
+    for metric in METRICS:
+        known = per_plan[metric].notna().to_numpy()
+        shares = np.full(len(out), np.nan)
+        shares[known] = rank_shares(per_plan.loc[known, metric], out.loc[known, "success_rate"])[0]
+        out[f"{metric}_rank_share"] = shares
+    return out.sort_values(["scene", "realisation", "planner"]).reset_index(drop=True)
+
+
 def calibration(data: dict) -> tuple[pd.DataFrame, pd.DataFrame]:
     """Per plan: analytic P_F and P_L against success on posterior samples. Returns the
     table per metric and planner (and 'all': Brier score over trials, each trial's
     forecast its plan's estimate; Spearman over plans; beside it the Spearman the same
     plans' trials measured again would reach, :func:`retest_spearman`, whose square root
-    is about what a perfect estimate reaches) and the reliability bins per metric."""
-    plans = data["plans"][data["plans"].executed == 1]
+    is about what a perfect estimate reaches) and the reliability bins per metric;
+    :func:`plan_calibration` gives the plans themselves."""
     post = data["trials"][data["trials"].shapes == "posterior"]
-    rate = plan_rates(post).reset_index()
-    per_plan = plans.merge(data["analytic"], on=["scene", "realisation", "planner"]).merge(
-        rate, on=["scene", "realisation", "planner"])
+    per_plan = _plans_with_rates(data)
     rows, bins = [], []
     edges = np.linspace(0, 1, RELIABILITY_BINS + 1)
     key = ["scene", "realisation", "planner"]
@@ -523,8 +563,9 @@ def write_report(out_dir: Path, figures: bool = True) -> dict:
     verdicts = reasons(data)
     by_regime, regime_bins = calibration_by_regime(data)
     board = leaderboard(data, seed=int(data["config"]["seed"]))
-    tables = [("summary", s), ("comparisons", comp), ("calibration", cal), ("reliability", bins),
-              ("failures", fails), ("reasons", verdicts), ("leaderboard", board)]
+    tables = [("summary", s), ("comparisons", comp), ("calibration", cal),
+              ("calibration_plans", plan_calibration(data)), ("reliability", bins), ("failures", fails),
+              ("reasons", verdicts), ("leaderboard", board)]
     if not by_regime.empty:
         tables += [("calibration_by_regime", by_regime), ("reliability_by_regime", regime_bins)]
     for name, frame in tables:

@@ -232,3 +232,58 @@ def test_calibration_splits_by_regime_and_the_parts_pool_back():
     assert pooled == pytest.approx(whole[(whole.metric == "p_l") & (whole.planner == "all")].brier.iloc[0], abs=1e-12)
     one = {**run, "config": {**run["config"], "scenes": [s for s in run["config"]["scenes"] if "rectangle" in s]}}
     assert calibration_by_regime(one)[0].empty
+
+
+def test_rank_shares_decompose_spearmans_shortfall_exactly_ties_included():
+    """rho = 1 - sum((z_f - z_s)^2) / (2 (n - 1)) with z the standardised average ranks:
+    against scipy's Spearman on data with ties (a second formulation) to 1e-12; the shares
+    sum to 1; in a perfect ranking with two plans swapped the whole shortfall is theirs,
+    half each; constant success gives NaN."""
+    from harness.report import rank_shares
+
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        n = int(rng.integers(5, 60))
+        forecast = np.round(rng.random(n), 1)  # ties
+        success = np.clip(forecast + rng.normal(0, 0.2, n), 0, 1).round(1)
+        shares, rho = rank_shares(forecast, success)
+        assert rho == pytest.approx(stats.spearmanr(forecast, success).statistic, abs=1e-12)
+        assert shares.sum() == pytest.approx(1.0, abs=1e-12) and (shares >= 0).all()
+    forecast = np.arange(10.0)
+    success = forecast.copy()
+    success[[3, 7]] = success[[7, 3]]
+    shares, rho = rank_shares(forecast, success)
+    assert shares[3] == pytest.approx(0.5) and shares[7] == pytest.approx(0.5)
+    assert np.delete(shares, [3, 7]) == pytest.approx(0.0)
+    assert np.isnan(rank_shares(forecast, np.ones(10))[0]).all()
+
+
+def test_the_plan_table_gives_each_executed_plan_and_its_share_of_the_ranking_error():
+    """calibration_plans.csv's table on the committed reference run: one row per executed
+    plan, its success the share of its posterior trials that succeeded (counted directly);
+    every plan succeeds there, so the shares are undefined (NaN); with one trial of one plan
+    lost, the P_L shares are rank_shares of the plans' P_L and success and sum to 1, and the
+    rho that decomposes is calibration.csv's pooled Spearman."""
+    from pathlib import Path
+
+    from harness.report import plan_calibration, rank_shares
+
+    root = Path(__file__).resolve().parents[1]
+    run = load(root / "results" / "reference")
+    table = plan_calibration(run)
+    executed = run["plans"][run["plans"].executed == 1]
+    assert len(table) == len(executed)
+    post = run["trials"][run["trials"].shapes == "posterior"]
+    for row in table.itertuples():
+        mine = post[(post.scene == row.scene) & (post.realisation == row.realisation) & (post.planner == row.planner)]
+        assert row.trials == len(mine) and row.success_rate == pytest.approx((mine.outcome == "success").mean())
+    assert (table.success_rate == 1.0).all() and table.p_l_rank_share.isna().all()
+    trials = run["trials"].copy()
+    lost = trials.index[(trials.shapes == "posterior") & (trials.scene == "marker") & (trials.planner == "gp-p")][0]
+    trials.loc[lost, "outcome"] = "slipped"
+    changed = {**run, "trials": trials}
+    table = plan_calibration(changed)
+    shares, rho = rank_shares(table.p_l, table.success_rate)
+    assert table.p_l_rank_share.to_numpy() == pytest.approx(shares) and shares.sum() == pytest.approx(1.0)
+    pooled = calibration(changed)[0]
+    assert rho == pytest.approx(pooled[(pooled.metric == "p_l") & (pooled.planner == "all")].spearman.iloc[0])
