@@ -38,6 +38,10 @@ MIN_GRADIENT = 1e-3
 #: :class:`Contacts`). Below the plate lines' spacing (2.5 mm on a 10 mm plate) it only
 #: separates a flat face from a curved one.
 PATCH_DEPTH = 0.0005
+#: Wrenches within this fraction of their length of a plane through the origin count as
+#: on it when a plate's several walls are judged together (plate_closure): the origin must
+#: lie strictly inside their hull.
+SPAN_TOLERANCE = 1e-9
 #: A grasp may be this much wider than the gripper's opening (m) and still be executed
 #: (narrowed to the opening): a width computed from two points carries rounding of
 #: about 1e-17 m, far below anything the gripper resolves. One tolerance for `plan`,
@@ -214,7 +218,11 @@ class Contacts:
     patch's extent along the outline (0 for a point or curved contact, up to the plate's
     width for a flat face; NaN where there is no contact). edge1, edge2 (B,) are the slopes
     at which the wall recedes from a plate that presses it with its edge, 0 where the
-    plate does not (:func:`edge_contacts`, :func:`edge_slopes`)."""
+    plate does not (:func:`edge_contacts`, :func:`edge_slopes`). normals1, normals2 (B, K,
+    2) are the contact normals at the touching lines of a plate that presses a wall with
+    a corner besides its first contact (a plate across a concave corner or arc: the wall's
+    normal at that corner, the plate's own at its other touching lines), NaN on every
+    other plate and line (:func:`plate_closure`, :func:`_wall_normals`)."""
 
     c1: np.ndarray
     c2: np.ndarray
@@ -227,6 +235,8 @@ class Contacts:
     patch2: np.ndarray
     edge1: np.ndarray
     edge2: np.ndarray
+    normals1: np.ndarray
+    normals2: np.ndarray
 
 
 def edge_contacts(depth: np.ndarray, first: np.ndarray) -> np.ndarray:
@@ -291,13 +301,13 @@ def find_contacts(fields: SDFBatch, g1, g2, jaw_width: float, field_index=None,
     field_index = np.broadcast_to(np.asarray(field_index, dtype=np.int64), (b,))
     out = Contacts(*(np.full((b, 2), np.nan) for _ in range(4)), np.empty(b, dtype=np.int8),
                    np.full(b, np.nan), np.full(b, np.nan), *(np.full((b, plate_lines, 2), np.nan) for _ in range(2)),
-                   np.zeros(b), np.zeros(b))
+                   np.zeros(b), np.zeros(b), *(np.full((b, plate_lines, 2), np.nan) for _ in range(2)))
     steps = march_steps(np.linalg.norm(g2 - g1, axis=1), fields.grid.cell)
     chunk = max(1, _MAX_EVALUATIONS // (plate_lines * int(steps.max(initial=2))))
     for start in range(0, b, chunk):
         s = slice(start, min(b, start + chunk))
         part = _contacts_chunk(fields, g1[s], g2[s], jaw_width, field_index[s], plate_lines, steps[s])
-        for name in ("c1", "c2", "n1", "n2", "status", "w1", "w2", "patch1", "patch2", "edge1", "edge2"):
+        for name in Contacts.__dataclass_fields__:
             getattr(out, name)[s] = getattr(part, name)
     return out
 
@@ -378,9 +388,10 @@ def _contacts_chunk(fields: SDFBatch, g1, g2, jaw_width, fidx, plate_lines, step
     depth = PATCH_DEPTH / safe[:, None]
     spacing = jaw_width / max(plate_lines - 1, 1)
     line_index = np.arange(plate_lines)
-    widths, patches, edges, slopes = [], [], [], []
-    for t, touch, best, sense in ((t1, t1 <= t1[rows, best1][:, None] + depth, best1, 1.0),
-                                  (t2, t2 >= t2[rows, best2][:, None] - depth, best2, -1.0)):
+    widths, patches, edges, slopes, normals = [], [], [], [], []
+    flush = math.sin(math.atan(PATCH_DEPTH / jaw_width)) if jaw_width > 0 else 1.0
+    for t, touch, best, sense, first_normal in ((t1, t1 <= t1[rows, best1][:, None] + depth, best1, 1.0, normal[:b]),
+                                                (t2, t2 >= t2[rows, best2][:, None] - depth, best2, -1.0, normal[b:])):
         touch &= (status == OK)[:, None]
         first = np.where(touch, line_index, plate_lines).min(axis=1)
         last = np.where(touch, line_index, -1).max(axis=1)
@@ -392,6 +403,8 @@ def _contacts_chunk(fields: SDFBatch, g1, g2, jaw_width, fidx, plate_lines, step
         beyond = np.where(np.isfinite(t), beyond, np.inf)
         edges.append(np.where(status == OK, edge_slopes(beyond, best, spacing), 0.0))
         slopes.append(_line_slope(beyond))
+        normals.append(_wall_normals(fields, fidx, where, touch, best, first_normal, -sense * d / safe[:, None], perp,
+                                     flush))
     # Walls parallel to each other within PATCH_DEPTH over the plate's width, however
     # inclined to the plates, are turned flush with both by the closing plates (the
     # squeeze): their contacts are faces, not edges. Seen from the two plates, parallel
@@ -401,7 +414,56 @@ def _contacts_chunk(fields: SDFBatch, g1, g2, jaw_width, fidx, plate_lines, step
         wedge = np.abs(slopes[0] + slopes[1]) * (plate_lines - 1) > PATCH_DEPTH
     n1, n2 = normal[:b], normal[b:]
     return Contacts(point[:b], point[b:], n1, n2, status, *widths, *patches, np.where(wedge, edges[0], 0.0),
-                    np.where(wedge, edges[1], 0.0))
+                    np.where(wedge, edges[1], 0.0), *normals)
+
+
+def _wall_normals(fields: SDFBatch, fidx, where: np.ndarray, touch: np.ndarray, first: np.ndarray,
+                  first_normal: np.ndarray, facing: np.ndarray, across: np.ndarray, flush: float) -> np.ndarray:
+    """The contact normals (B, K, 2) at the touching lines ``where`` (B, K, 2) of the plates
+    that press a wall with a corner besides their first contact, NaN on every other plate.
+    A rigid plate pushes with its face wherever the wall it touches is flush with it, and
+    with its corner where a wall approaches it beyond its edge: an outer line ``touch``-ing
+    (B, K) such a wall (its normal, from the bicubic interpolant's gradient, leaning
+    towards the plate's middle by more than ``flush``, the sine of the flush slope) takes
+    the wall's normal, every other touching line the plate's own (``facing`` (B, 2): the
+    outward normal of a wall flush with the plate). A plate across a concave corner or a
+    concave arc presses both its corners (docs/lift.md, "A plate on two walls"). first
+    (B,): the first contact's line, which keeps the first contact's normal
+    ``first_normal`` (B, 2; Contacts.n1, n2); ``across`` (B, 2) runs from the first line
+    to the last."""
+    b, k = touch.shape
+    out = np.full(where.shape, np.nan)
+    if k < 2:
+        return out
+    lines = np.array([0, k - 1])
+    rows, which = np.nonzero(touch[:, lines] & (first[:, None] != lines[None, :]))
+    if not len(rows):
+        return out
+    line = lines[which]
+    _, gradient = interpolate(fields, fidx[rows], where[rows, line])
+    size = np.linalg.norm(gradient, axis=1, keepdims=True)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        wall = gradient / size
+    outward = np.where(line == 0, -1.0, 1.0)  # from the plate's middle towards this edge
+    corner = (size[:, 0] > MIN_GRADIENT) & (outward * np.einsum("ij,ij->i", wall, across[rows]) < -flush)
+    rows, line, wall = rows[corner], line[corner], wall[corner]
+    plates = np.unique(rows)
+    out[plates] = np.where(touch[plates, :, None], facing[plates, None, :], np.nan)
+    out[rows, line] = wall
+    out[plates, first[plates]] = first_normal[plates]
+    return out
+    normal = np.broadcast_to(facing[rows], (len(rows), 2)).copy()
+    outer = (lines == 0) | (lines == k - 1)
+    if outer.any():
+        _, gradient = interpolate(fields, fidx[rows[outer]], where[rows[outer], lines[outer]])
+        size = np.linalg.norm(gradient, axis=1, keepdims=True)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            wall = gradient / size
+        outward = np.where(lines[outer] == 0, -1.0, 1.0)  # from the plate's middle towards this edge
+        corner = (size[:, 0] > MIN_GRADIENT) & (outward * np.einsum("ij,ij->i", wall, across[rows[outer]]) < 0)
+        normal[np.flatnonzero(outer)[corner]] = wall[corner]
+    out[rows, lines] = normal
+    return out
 
 
 def _line_slope(depth: np.ndarray) -> np.ndarray:
@@ -560,12 +622,62 @@ def plate_closure(contacts: Contacts, friction, com, torque_scale: float, with_q
     closure = np.zeros(b, dtype=bool)
     ok = contacts.status == OK
     closure[ok] = force_closure(p1[ok], p2[ok], contacts.n1[ok], contacts.n2[ok], friction[ok])
+    # A plate that presses walls with its corners pushes on each with that wall's normal:
+    # judged on every touching point and its cone at once where no pair is in closure.
+    walls = ok & ~closure & (np.isfinite(contacts.normals1[:, :, 0]).any(axis=1)
+                             | np.isfinite(contacts.normals2[:, :, 0]).any(axis=1))
+    many = np.flatnonzero(walls)
+    wrenches = None
+    if len(many):
+        wrenches, count = _patch_wrenches(contacts, many, friction[many], com[many], torque_scale)
+        closure[many] = _kernels().spans_wrenches(wrenches, count, SPAN_TOLERANCE)
     quality = np.zeros(b)
     if not with_quality:
         return closure, quality
-    quality[closure] = ferrari_canny(p1[closure], p2[closure], contacts.n1[closure], contacts.n2[closure],
-                                     friction[closure], com[closure], torque_scale)
+    pair = closure & ~walls
+    quality[pair] = ferrari_canny(p1[pair], p2[pair], contacts.n1[pair], contacts.n2[pair], friction[pair], com[pair],
+                                  torque_scale)
+    for r in np.flatnonzero(closure & walls):
+        k = np.searchsorted(many, r)
+        quality[r] = hull_radius(wrenches[k, :count[k]])
     return closure, quality
+
+
+def _patch_wrenches(contacts: Contacts, rows, friction, com, torque_scale: float):
+    """The friction-cone edge wrenches (R, M, 3) of every touching point of both plates of
+    grasps ``rows`` (on a plate that presses walls with its corners each point with its own
+    normal, Contacts.normals1/normals2; elsewhere with the plate's first contact's),
+    packed first, and how many each grasp has (R,)."""
+    points, normals = [], []
+    for c, n, patch, own in ((contacts.c1, contacts.n1, contacts.patch1, contacts.normals1),
+                             (contacts.c2, contacts.n2, contacts.patch2, contacts.normals2)):
+        p = np.concatenate([c[rows, None], patch[rows]], axis=1)  # (R, K + 1, 2)
+        first = np.broadcast_to(n[rows, None], p.shape)
+        each = np.concatenate([n[rows, None], own[rows]], axis=1)
+        separate = np.isfinite(own[rows, :, 0]).any(axis=1)
+        points.append(p)
+        normals.append(np.where(separate[:, None, None], each, first))
+    p, n = np.concatenate(points, axis=1), np.concatenate(normals, axis=1)  # (R, P, 2)
+    present = np.isfinite(p[:, :, 0]) & np.isfinite(n[:, :, 0])
+    r_, k_ = np.nonzero(present)
+    edge = contact_wrenches(p[r_, k_], p[r_, k_], n[r_, k_], n[r_, k_], friction[r_], com[r_], torque_scale)[:, :2]
+    count = 2 * present.sum(axis=1)
+    slot = 2 * (np.cumsum(present, axis=1) - 1)[r_, k_]
+    wrenches = np.zeros((len(rows), 2 * p.shape[1], 3))
+    wrenches[r_, slot], wrenches[r_, slot + 1] = edge[:, 0], edge[:, 1]
+    return wrenches, count
+
+
+def hull_radius(wrenches: np.ndarray) -> float:
+    """The Ferrari-Canny quality of a set of wrenches (M, 3): the radius of the largest
+    origin-centred ball inside their convex hull (0 when the origin is not strictly inside)."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    try:
+        hull = ConvexHull(wrenches)
+    except QhullError:
+        return 0.0
+    return float(max(0.0, (-hull.equations[:, 3]).min()))
 
 
 def contact_wrenches(c1, c2, n1, n2, friction, com, torque_scale: float) -> np.ndarray:

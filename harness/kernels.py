@@ -203,3 +203,48 @@ def deepest_pairs(patch1, patch2, n1, n2):
                     best, bi, bj = depth, i, j
         first[r], second[r] = bi, bj
     return first, second
+
+
+@njit(cache=True, error_model="numpy")
+def spans_wrenches(w, count, tolerance):
+    """Whether the first count[b] wrenches w[b] (B, M, 3) positively span the wrench space
+    (the origin strictly inside their convex hull: force closure). They do not exactly when
+    some direction v has v . w_i <= 0 for every wrench; such a plane through the origin can
+    be turned until it holds two of the wrenches (or all of them lie in one plane), so the
+    candidates v are the cross products of the pairs, both signs. ``tolerance`` is relative
+    to the wrenches' lengths: a wrench that close to the plane counts as on it."""
+    b = w.shape[0]
+    out = np.zeros(b, dtype=np.bool_)
+    for r in range(b):
+        n = count[r]
+        if n < 4:
+            continue
+        spans = True
+        planes = 0
+        for i in range(n):
+            for j in range(i + 1, n):
+                vx = w[r, i, 1] * w[r, j, 2] - w[r, i, 2] * w[r, j, 1]
+                vy = w[r, i, 2] * w[r, j, 0] - w[r, i, 0] * w[r, j, 2]
+                vz = w[r, i, 0] * w[r, j, 1] - w[r, i, 1] * w[r, j, 0]
+                size = math.sqrt(vx * vx + vy * vy + vz * vz)
+                if size <= 1e-12 * (w[r, i, 0] ** 2 + w[r, i, 1] ** 2 + w[r, i, 2] ** 2 + w[r, j, 0] ** 2
+                                    + w[r, j, 1] ** 2 + w[r, j, 2] ** 2):
+                    continue  # a parallel pair spans no plane
+                planes += 1
+                for sign in (1.0, -1.0):
+                    separates = True
+                    for k in range(n):
+                        dot = sign * (vx * w[r, k, 0] + vy * w[r, k, 1] + vz * w[r, k, 2])
+                        scale = size * math.sqrt(w[r, k, 0] ** 2 + w[r, k, 1] ** 2 + w[r, k, 2] ** 2)
+                        if dot > tolerance * scale:
+                            separates = False
+                            break
+                    if separates:
+                        spans = False
+                        break
+                if not spans:
+                    break
+            if not spans:
+                break
+        out[r] = spans and planes > 0
+    return out

@@ -3,6 +3,7 @@ forms and an independent linear-programming formulation."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -563,3 +564,120 @@ def test_a_curved_wall_is_pressed_by_the_plates_edge_only_when_its_tangent_point
     c = find_contacts(field, [[offset, -0.04]], [[offset, 0.04]], JAW)
     assert c.status[0] == OK
     assert bool(c.edge1[0]) == expected and bool(c.edge2[0]) == expected
+
+
+# -- a plate bearing on separate walls ------------------------------------------------------
+
+
+def _polygon_field(outline, cells=120, extent=0.12):
+    """The exact field of a polygon scene (fully observed), on a fine grid."""
+    from pathlib import Path
+
+    from harness.scene import parse_scene
+
+    data = {"name": "walls", "grid": {"size": cells, "extent": extent},
+            "shape": {"type": "polygon", "exterior": [list(p) for p in outline]}, "sensor": {"noise": 0.0005},
+            "physics": {"thickness": 0.03, "density": 1000.0, "friction": 0.5},
+            "gripper": {"opening": 0.1, "jaw_width": 0.01, "force": 20.0}}
+    scene = parse_scene(data, "<walls>", Path("."))
+    return SDFBatch(scene.grid, scene.true_sdf[None], scene.true_sdf_gradient[None])
+
+
+def _lp_closure(points, normals, friction):
+    """Force closure of frictional point contacts by a linear program on their cone edges'
+    wrenches (torques about the origin): the origin strictly inside their hull."""
+    edges = contact_wrenches(points, points, normals, normals, np.full(len(points), friction),
+                             np.zeros(2), 0.03)[:, :2].reshape(-1, 3)
+    m = len(edges)
+    a_eq = np.vstack([np.hstack([edges.T, np.zeros((3, 1))]), np.r_[np.ones(m), 0]])
+    res = linprog(c=np.r_[np.zeros(m), -1], A_ub=np.hstack([-np.eye(m), np.ones((m, 1))]), b_ub=np.zeros(m),
+                  A_eq=a_eq, b_eq=[0, 0, 0, 1], bounds=[(0, None)] * m + [(None, 1)], method="highs")
+    return res.status == 0 and -res.fun > 1e-10 and np.linalg.matrix_rank(edges[1:] - edges[0], tol=1e-9) == 3
+
+
+def test_many_wrenches_span_the_space_exactly_when_a_linear_program_says_so():
+    """spans_wrenches (the pairs' planes) against the LP, on sets of two to five random
+    frictional contacts, and hull_radius against it and against the two-contact closed
+    form (ferrari_canny)."""
+    from harness import kernels
+    from harness.grasp import hull_radius
+
+    rng = np.random.default_rng(17)
+    agree, inside = 0, 0
+    for trial in range(600):
+        k = int(rng.integers(2, 6))
+        points = rng.uniform(-0.03, 0.03, (k, 2))
+        normals = _rotate(-points / np.linalg.norm(points, axis=1, keepdims=True), rng.uniform(-1.4, 1.4, k))
+        friction = float(rng.uniform(0.05, 0.8))
+        edges = contact_wrenches(points, points, normals, normals, np.full(k, friction), np.zeros(2), 0.03)
+        edges = edges[:, :2].reshape(-1, 3)
+        fast = kernels.spans_wrenches(edges[None], np.array([len(edges)]), 1e-9)[0]
+        assert fast == _lp_closure(points, normals, friction), trial
+        assert (hull_radius(edges) > 1e-12) == fast, trial
+        agree += 1
+        inside += fast
+        if k == 2 and fast:
+            q = ferrari_canny(points[:1], points[1:], normals[:1], normals[1:], friction, np.zeros(2), 0.03)[0]
+            assert hull_radius(edges) == pytest.approx(q, rel=1e-9)
+    assert agree == 600 and 0.2 < inside / agree < 0.8
+
+
+def test_a_plate_across_a_v_notch_bears_on_both_walls():
+    """A 6 x 3 cm bar with a V-notch 2 cm wide and 1 cm deep in one end (walls at 45
+    degrees), gripped along its axis: the 1 cm plate's two edges meet the walls 5 mm from
+    the opening and the apex (the lines between reach deeper), the other plate the flat
+    end. Friction 0.5 (a 26.6-degree cone): no pair of patch points is in closure with one
+    normal per plate, but the plate's two corners on the walls, with the walls' normals,
+    and the other plate are: the verdict is the LP's on the exact contacts, at every
+    friction. (The bar sits
+    0.3 mm off the grid's nodes: a node on a wall has no exact gradient.)"""
+    x0 = -0.0303
+    field = _polygon_field([(x0, -0.015), (0.0297, -0.015), (0.0297, 0.015), (x0, 0.015), (x0, 0.01),
+                            (x0 + 0.01, 0.0), (x0, -0.01)])
+    c = find_contacts(field, [[-0.045, 0.0]], [[0.045, 0.0]], JAW)
+    touching = np.flatnonzero(np.isfinite(c.patch1[0, :, 0]))
+    np.testing.assert_array_equal(touching, [0, PLATE_LINES - 1])
+    np.testing.assert_allclose(c.patch1[0, touching], [[x0 + 0.005, -0.005], [x0 + 0.005, 0.005]], atol=2e-5)
+    wall = np.array([[-1.0, 1.0], [-1.0, -1.0]]) / math.sqrt(2)  # the lower and the upper wall, outward
+    np.testing.assert_allclose(c.normals1[0, touching], wall, atol=0.02)
+    assert np.isnan(c.normals1[0, 1:-1]).all() and np.isnan(c.normals2).all()
+    single = dataclasses.replace(c, normals1=np.full_like(c.normals1, np.nan))
+    assert not plate_closure(single, 0.5, field.center_of_mass, 0.03)[0][0]
+    closure, quality = plate_closure(c, 0.5, field.center_of_mass, 0.03)
+    exact = np.vstack([[[x0 + 0.005, -0.005], [x0 + 0.005, 0.005]], c.patch2[0][np.isfinite(c.patch2[0, :, 0])]])
+    normals = np.vstack([wall, np.tile([1.0, 0.0], (len(exact) - 2, 1))])
+    assert closure[0] and quality[0] > 0
+    for friction in (0.0, 0.05, 0.2, 0.5, 0.8):  # a V-block and a flat plate: held even without friction
+        expected = _lp_closure(exact - field.center_of_mass[0], normals, friction)
+        assert plate_closure(c, friction, field.center_of_mass, 0.03)[0][0] == expected, friction
+
+
+def test_only_a_plates_corners_take_a_walls_normal():
+    """A plate inside a ring's hole meets the concave inner wall with its two corners, where
+    the wall's normal (towards the hole's centre) leans towards the plate's middle: with a
+    12 mm hole the lines between lie 0.8 mm and more beyond, with a 30 mm hole within the
+    patch's 0.5 mm (all five lines touch), and in both the corners take the wall's normal,
+    the inner lines the plate's own. A plate on a flat face split by a shallow groove
+    presses no corner: one normal per plate, as before."""
+    grid = Grid(120, 0.12)
+    outer, outer_grad = disk_field(grid, 0.045)
+    for hole, expected in ((0.012, [0, PLATE_LINES - 1]), (0.030, list(range(PLATE_LINES)))):
+        inner, inner_grad = disk_field(grid, hole)
+        grad = np.where((outer > -inner)[..., None], outer_grad, -inner_grad)
+        ring = SDFBatch(grid, np.maximum(outer, -inner)[None], grad[None])
+        c = find_contacts(ring, [[0.0, 0.0]], [[0.055, 0.0]], JAW)  # jaw 1 in the hole, closing outwards
+        touching = np.flatnonzero(np.isfinite(c.patch1[0, :, 0]))
+        np.testing.assert_array_equal(touching, expected)
+        corners = c.patch1[0, [0, PLATE_LINES - 1]]
+        np.testing.assert_allclose(np.linalg.norm(corners, axis=1), hole, atol=2e-5)
+        np.testing.assert_allclose(c.normals1[0, [0, PLATE_LINES - 1]], -corners / hole, atol=0.02)
+        np.testing.assert_array_equal(c.normals1[0, touching[1:-1]], np.tile([-1.0, 0.0], (len(touching) - 2, 1)))
+        assert np.isnan(c.normals2).all()  # the outer wall is convex: the other plate presses no corner
+    # The groove: a 4 mm wide, 1 mm deep cut in the bar's end face, across the plate's middle.
+    x0 = -0.0303
+    field = _polygon_field([(x0, -0.015), (0.0297, -0.015), (0.0297, 0.015), (x0, 0.015), (x0, 0.002),
+                            (x0 + 0.001, 0.002), (x0 + 0.001, -0.002), (x0, -0.002)])
+    c = find_contacts(field, [[-0.045, 0.0]], [[0.045, 0.0]], JAW)
+    np.testing.assert_array_equal(np.flatnonzero(np.isfinite(c.patch1[0, :, 0])), [0, 1, 3, 4])
+    assert np.isnan(c.normals1).all() and np.isnan(c.normals2).all()
+    assert plate_closure(c, 0.5, field.center_of_mass, 0.03)[0][0]

@@ -10,7 +10,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from harness.grasp import PATCH_DEPTH, SDFBatch, find_contacts
+from harness.grasp import PATCH_DEPTH, SDFBatch, find_contacts, plate_closure
 from harness.lift import (LIFT_REASONS, PLATE_CLEARANCE, axis_height, clearance, hold_probability, judge,
                           largest_lever, patch_height, smooth_lift, torque_demand)
 from harness.quality import FAILURE_REASONS, EvaluationDraws, evaluate_draws
@@ -620,3 +620,29 @@ def test_the_squeeze_lines_print_each_angle():
     lines = _squeeze_lines(res)
     assert len(lines) == 2 and "through the centre at 0, 40 degrees" in lines[0] and "16 trials" in lines[0]
     assert lines[1] == "  bar 6 x 3: 1.00/1.00/1.00  1.00/0.00/0.00"
+
+
+def test_the_notch_cases_put_the_plates_corners_on_both_walls_at_the_notchs_middle():
+    """bench lift's notch cases (docs/lift.md, "A plate on two walls"): on the true field,
+    on the notch's middle the first plate meets the two walls with its outer lines only,
+    each corner with its wall's normal (45 and 63.4 degrees off the closing line, within 3
+    degrees), which the closure judges together; 4 mm off, its far corner reaches the end
+    beyond the notch and no corner is pressed; the mass is the notched bar's."""
+    from harness.bench.lift_study import NOTCHES
+
+    shallow, deep, heavy = NOTCHES
+    assert shallow.mass == pytest.approx(1000 * 0.03 * (0.06 * 0.03 - 0.006 * 0.006))
+    assert heavy.mass == pytest.approx(8 * shallow.mass)
+    for case, lean in ((shallow, 45.0), (deep, math.degrees(math.atan2(0.012, 0.006)))):
+        scene = case.scene()
+        fields = SDFBatch(scene.grid, scene.true_sdf[None], scene.true_sdf_gradient[None])
+        g = case.grasp(0.0)
+        c = find_contacts(fields, g[:1], g[1:], 0.01)
+        touching = np.flatnonzero(np.isfinite(c.patch1[0, :, 0]))
+        np.testing.assert_array_equal(touching, [0, 4])
+        angles = np.degrees(np.arctan2(np.abs(c.normals1[0, touching, 1]), -c.normals1[0, touching, 0]))
+        np.testing.assert_allclose(angles, lean, atol=3.0)
+        assert plate_closure(c, case.friction, fields.center_of_mass, 0.05)[0][0]
+        g = case.grasp(0.004)
+        c = find_contacts(fields, g[:1], g[1:], 0.01)
+        assert np.isnan(c.normals1).all() and np.isnan(c.normals2).all()

@@ -3,7 +3,8 @@ their width at growing offsets from their centre of mass, where the analytic P_L
 simulated success fall through 0.5; hang bars, which the weight turns in the plates, at
 growing lengths, where success falls as their hang nears the lifted table; the
 calibration rectangle's bar gripped through its centre at 0-90 degrees to its length,
-where the plates squeeze it flush (SqueezeCase); two loads the model leaves out, at
+where the plates squeeze it flush (SqueezeCase); the same bar with a V-notch in one end,
+whose walls a plate meets with its corners (NotchCase); two loads the model leaves out, at
 falling grip forces (LoadCase); and the friction levers Bullet's contact manifolds give
 the jaw plates on the library's trial set.
 
@@ -238,6 +239,56 @@ class SqueezeCase:
 #: friction 0.5, a cone of 26.6 degrees, 20 N), light (54 g) and heavy (432 g, 8000
 #: kg/m^3: the table's friction against the plates' couple grows with the weight).
 SQUEEZES = tuple(SqueezeCase(Bar(0.06, density, 0.5, 20.0)) for density in (1000.0, 8000.0))
+
+
+@dataclass(frozen=True)
+class NotchCase:
+    """A plate on two walls (docs/lift.md, "A plate on two walls"): the calibration
+    rectangle's 6 x 3 cm bar (3 cm thick) with a V-notch ``2 half_open`` wide and ``depth``
+    deep in the middle of one end, gripped along its length ``offset`` (m) off the notch's
+    middle, so that the 1 cm plate meets the notch's two walls with its corners (within
+    about 1 mm of the middle) or one wall and the end beyond the notch. On a 1 mm grid, the
+    bar 0.3 mm off the nodes (a node on a wall has no exact gradient)."""
+
+    depth: float
+    density: float
+    half_open: float = 0.006
+    friction: float = 0.5
+    force: float = 20.0
+    length: float = 0.06
+    width: float = 0.03
+    thickness: float = 0.03
+    shift: float = -0.0003
+
+    @property
+    def mass(self) -> float:
+        notch = self.half_open * self.depth
+        return self.density * self.thickness * (self.length * self.width - notch)
+
+    @property
+    def label(self) -> str:
+        return (f"bar {self.length * 100:g} x {self.width * 100:g} cm, notch {2 * self.half_open * 1e3:g} mm wide, "
+                f"{self.depth * 1e3:g} mm deep, {self.mass * 1000:.0f} g")
+
+    def scene(self) -> Scene:
+        x0, x1, b = -0.5 * self.length + self.shift, 0.5 * self.length + self.shift, 0.5 * self.width
+        outline = [(x0, -b), (x1, -b), (x1, b), (x0, b), (x0, self.half_open), (x0 + self.depth, 0.0),
+                   (x0, -self.half_open)]
+        return _solid("notch", {"type": "polygon", "exterior": [list(p) for p in outline]}, self.thickness,
+                      self.density, self.friction, self.force, f"<notch {self.label}>", cells=100, extent=0.1)
+
+    def offsets(self) -> np.ndarray:
+        return np.array([0.0, 0.5, 1.0, 1.5, 2.0, 3.0, 4.0]) * 1e-3
+
+    def grasp(self, offset: float) -> np.ndarray:
+        reach = 0.5 * self.length + CLEARANCE
+        return np.array([[self.shift - reach, offset], [self.shift + reach, offset]])
+
+
+#: The notch cases: walls at 45 degrees (6 mm deep) and 26.6 degrees (12 mm) to the
+#: closing line, both beyond the friction cone of 0.5 (26.6 degrees) from one normal per
+#: plate; light (1000 kg/m^3) and heavy (8000).
+NOTCHES = (NotchCase(0.006, 1000.0), NotchCase(0.012, 1000.0), NotchCase(0.006, 8000.0))
 
 
 @dataclass(frozen=True)
@@ -883,12 +934,13 @@ class Settings:
 def benchmark(settings: Settings = Settings()) -> dict:
     """The bar sweeps (where P_L and simulated success fall through 0.5) and the friction
     levers of Bullet's contact manifolds on the library trial set; the bar sweeps again
-    in MuJoCo; and the other controlled cases (slides, pushes, squeezes, hangs, loads, the off-axis
-    L and T) in both engines."""
+    in MuJoCo; and the other controlled cases (slides, pushes, squeezes, notches, hangs, loads, the
+    off-axis L and T) in both engines."""
     return {**validate(trials=settings.trials, seed=settings.seed),
             "slide": validate(SLIDES, trials=settings.trials, seed=settings.seed),
             "push": validate(PUSHES, trials=settings.trials, seed=settings.seed),
             "squeeze": validate(SQUEEZES, trials=settings.trials, seed=settings.seed),
+            "notch": validate(NOTCHES, trials=settings.trials, seed=settings.seed),
             "hang": hang_validate(trials=settings.trials, seed=settings.seed),
             "hang_fine": hang_validate(trials=settings.trials, seed=settings.seed, finer=HANG_FINER),
             "ends": hang_validate(END_CASES, trials=settings.trials, seed=settings.seed),
@@ -899,6 +951,7 @@ def benchmark(settings: Settings = Settings()) -> dict:
                        "slide": validate(SLIDES, trials=settings.trials, seed=settings.seed, engine="mujoco"),
                        "push": validate(PUSHES, trials=settings.trials, seed=settings.seed, engine="mujoco"),
                        "squeeze": validate(SQUEEZES, trials=settings.trials, seed=settings.seed, engine="mujoco"),
+                       "notch": validate(NOTCHES, trials=settings.trials, seed=settings.seed, engine="mujoco"),
                        "hang": hang_validate(trials=settings.trials, seed=settings.seed, engine="mujoco"),
                        "ends": hang_validate(END_CASES, trials=settings.trials, seed=settings.seed, engine="mujoco"),
                        "loads": load_validate(trials=settings.trials, seed=settings.seed, engine="mujoco"),
@@ -913,6 +966,8 @@ def format_lines(res: dict) -> list[str]:
         lines += _slide_lines(res["push"], "push cases", "pushes of")
     if "squeeze" in res:
         lines += _squeeze_lines(res["squeeze"])
+    if "notch" in res:
+        lines += _notch_lines(res["notch"])
     for key in ("hang", "hang_fine", "ends"):
         if key in res:
             lines += _hang_lines(res[key])
@@ -933,6 +988,8 @@ def format_lines(res: dict) -> list[str]:
             lines += _slide_lines(res["mujoco"]["push"], "push cases", "pushes of")
         if "squeeze" in res["mujoco"]:
             lines += _squeeze_lines(res["mujoco"]["squeeze"])
+        if "notch" in res["mujoco"]:
+            lines += _notch_lines(res["mujoco"]["notch"])
         for key in ("hang", "ends"):
             if key in res["mujoco"]:
                 lines += _hang_lines(res["mujoco"][key])
@@ -1006,6 +1063,11 @@ def _squeeze_lines(res: dict) -> list[str]:
     """The squeeze cases' lines: :func:`_slide_lines` over angles (degrees)."""
     return _slide_lines(res, "squeeze cases", "the jaws' line through the centre at", "degrees to the bar's length",
                         scale=1.0, per="angle")
+
+
+def _notch_lines(res: dict) -> list[str]:
+    """The notch cases' lines: :func:`_slide_lines` over offsets from the notch's middle."""
+    return _slide_lines(res, "notch cases", "the jaws' line along the bar", "mm off the notch's middle")
 
 
 def _hang_lines(res: dict) -> list[str]:
