@@ -452,18 +452,6 @@ def _wall_normals(fields: SDFBatch, fidx, where: np.ndarray, touch: np.ndarray, 
     out[rows, line] = wall
     out[plates, first[plates]] = first_normal[plates]
     return out
-    normal = np.broadcast_to(facing[rows], (len(rows), 2)).copy()
-    outer = (lines == 0) | (lines == k - 1)
-    if outer.any():
-        _, gradient = interpolate(fields, fidx[rows[outer]], where[rows[outer], lines[outer]])
-        size = np.linalg.norm(gradient, axis=1, keepdims=True)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            wall = gradient / size
-        outward = np.where(lines[outer] == 0, -1.0, 1.0)  # from the plate's middle towards this edge
-        corner = (size[:, 0] > MIN_GRADIENT) & (outward * np.einsum("ij,ij->i", wall, across[rows[outer]]) < 0)
-        normal[np.flatnonzero(outer)[corner]] = wall[corner]
-    out[rows, lines] = normal
-    return out
 
 
 def _line_slope(depth: np.ndarray) -> np.ndarray:
