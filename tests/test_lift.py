@@ -646,3 +646,14 @@ def test_the_notch_cases_put_the_plates_corners_on_both_walls_at_the_notchs_midd
         g = case.grasp(0.004)
         c = find_contacts(fields, g[:1], g[1:], 0.01)
         assert np.isnan(c.normals1).all() and np.isnan(c.normals2).all()
+
+
+def test_the_notch_lines_print_each_offset_in_mm():
+    from harness.bench.lift_study import _notch_lines
+
+    points = [{"offset": o, "success": 1.0, "p_l": 1.0, "p_f": f} for o, f in ((0.0, 0.45), (0.004, 1.0))]
+    res = {"engine": "mujoco", "trials_per_offset": 16, "analytic_draws": 400,
+           "rows": [{"bar": "bar 6 x 3 cm, notch", "points": points}]}
+    lines = _notch_lines(res)
+    assert len(lines) == 2 and "notch cases (mujoco)" in lines[0] and "0, 4 mm off the notch's middle" in lines[0]
+    assert lines[1] == "  bar 6 x 3 cm, notch: 1.00/1.00/0.45  1.00/1.00/1.00"
