@@ -396,18 +396,69 @@ def estimate_p_f(grasps, draws: EvaluationDraws, settings: GraspSettings, lift: 
     return evaluate_draws(grasps, draws, settings, lift).estimates
 
 
-def ranking_scores(grasps, draws: EvaluationDraws, settings: GraspSettings, lift: bool):
+#: With a floor, ranking_scores judges the grasps on the draws up to each of these counts
+#: in turn (then on the rest), dropping between blocks the grasps that can no longer win.
+#: A call's fixed cost (the push's and the squeeze's steps, each a contact search of about
+#: 1 ms however few its draws) makes many small blocks dear: on five of make eval's cells
+#: gp-p-lift took 0.47 of its time with these ends, 0.56 with 100 and 400, 0.66 with a
+#: block every 100 draws; on all 30 cells of make eval, 0.55 (2026-11-29; the plans the
+#: same with every choice: docs/planners.md, "Helpers").
+RANK_ENDS = (100, 250, 500)
+#: A grasp is dropped only when even a chance of 1 on every draw left would keep its score
+#: this far below the bar: the sums' rounding (about 1e-13 over 1000 draws) cannot make it
+#: win, so the pick and its score are those of judging every grasp on every draw.
+RANK_SLACK = 1e-9
+
+
+def ranking_scores(grasps, draws: EvaluationDraws, settings: GraspSettings, lift: bool, floor: float | None = None):
     """How the Monte-Carlo planners rank G grasps on shared draws: (score, tie-break),
     each (G,). With the lift, the score is P_L with the plates' levers averaged instead
     of drawn (``DrawOutcomes.lift_chance``: the same expectation, less variance than the
     share of lifted draws); without, P_F. Ties (common near 0 and 1) go to the higher
     mean Ferrari-Canny quality. gp-p ranks its candidates by it, gp-gpis-opt its
-    finalists."""
-    if lift:
-        outcomes = evaluate_draws(grasps, draws, settings)
-        return outcomes.lift_chance.mean(axis=1), outcomes.ferrari_canny.mean(axis=1)
-    estimates = estimate_p_f(grasps, draws, settings, lift=False)
-    return np.array([e.p_f for e in estimates]), np.array([e.ferrari_canny_mean for e in estimates])
+    finalists.
+
+    ``floor`` (the best score seen so far, or -inf) asks only for the winner: the grasps
+    are judged block by block of draws (RANK_ENDS), and after each block a grasp whose score could
+    not reach the bar even with a chance of 1 on every draw left is dropped (its score and
+    tie-break are -inf). The bar is the floor or the score some grasp of the set is sure
+    of already (its chances so far over every draw: a chance is never below 0), whichever
+    is higher, less RANK_SLACK. Every grasp not dropped gets the very score and tie-break
+    it gets without a floor (each pair is judged as on the whole grid, evaluate_pairs; each
+    row reduced alike), so the winner, its score and every tie are the same: an exact
+    branch and bound, which spares the draws of grasps that lose early (most of a random
+    candidate set's, and their draws out of force closure are the costly ones: the push and
+    the squeeze)."""
+    if floor is None or len(draws) <= RANK_ENDS[0]:
+        if lift:
+            outcomes = evaluate_draws(grasps, draws, settings)
+            return outcomes.lift_chance.mean(axis=1), outcomes.ferrari_canny.mean(axis=1)
+        estimates = estimate_p_f(grasps, draws, settings, lift=False)
+        return np.array([e.p_f for e in estimates]), np.array([e.ferrari_canny_mean for e in estimates])
+    starts = as_starts(grasps)
+    g, n = len(starts), len(draws)
+    chance, fc = np.zeros((g, n)), np.zeros((g, n))
+    alive = np.ones(g, dtype=bool)
+    ends = [e for e in RANK_ENDS if e < n] + [n]
+    for lo, hi in zip([0] + ends[:-1], ends):
+        rows = np.flatnonzero(alive)
+        if len(rows) == 0:  # every grasp below the floor
+            break
+        grasp_of, draw_of = np.repeat(rows, hi - lo), np.tile(np.arange(lo, hi), len(rows))
+        out = evaluate_pairs(starts[grasp_of], draw_of, draws, settings, lift)
+        chance[grasp_of, draw_of] = out.lift_chance if lift else out.closure
+        fc[grasp_of, draw_of] = out.ferrari_canny
+        if hi == n:
+            break
+        known = chance[rows, :hi].sum(axis=1)
+        bar = max(float(floor), float(known.max()) / n) - RANK_SLACK
+        alive[rows[(known + (n - hi)) / n < bar]] = False
+    score, tie = np.full(g, -np.inf), np.full(g, -np.inf)
+    kept = chance[alive]
+    # The rows as the whole grid reduces them: P_L's mean, P_F's count over n.
+    score[alive] = kept.mean(axis=1) if lift else kept.astype(bool).sum(axis=1) / n
+    tie[alive] = fc[alive].mean(axis=1)
+    return score, tie
 
 
 def as_starts(grasps) -> np.ndarray:

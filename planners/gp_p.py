@@ -34,7 +34,7 @@ class GPP(Planner):
         # The best estimate of many is biased upwards (the winner's curse); the harness
         # re-estimates every returned grasp on its own evaluation draws.
         return search(problem, rng, self.candidates, self.angular_noise_deg, self._score, setup=self._setup,
-                      estimate_of=lambda best: best, record=record)
+                      estimate_of=lambda best: best, record=record, bounded=True)
 
     def _setup(self, problem: Problem, rng: np.random.Generator):
         # The pool drawn block by block, as gp-bandit draws it (harness.quality.DrawPool):
@@ -42,6 +42,6 @@ class GPP(Planner):
         # many samples it holds, and uniform allocation must judge gp-p's very numbers.
         return problem, DrawPool(problem.belief, self.samples, *rng.spawn(4)).draws(self.samples)
 
-    def _score(self, grasps, state):
+    def _score(self, grasps, state, floor=None):
         problem, draws = state
-        return ranking_scores(grasps, draws, problem.settings, self.quality == "lift")
+        return ranking_scores(grasps, draws, problem.settings, self.quality == "lift", floor=floor)

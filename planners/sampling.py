@@ -13,13 +13,16 @@ CHUNK = 10
 
 
 def search(problem: Problem, rng: np.random.Generator, count: int, angular_noise_deg: float, score, setup=None,
-           estimate_of=None, record=None) -> Plan:
+           estimate_of=None, record=None, bounded: bool = False) -> Plan:
     """Generate ``count`` candidates, score them in chunks of CHUNK with
     ``score(grasps (k, 2, 2), state) -> (values (k,), tie_break (k,))`` (higher is better,
     compared as pairs; ``state`` is what ``setup(problem, rng)`` returned), keep the best,
     and stop early when the time budget is spent. ``estimate_of(best_value)`` gives the
     plan's estimate of P_F (or None). ``record``, a list, receives (seconds, grasps,
-    values) for every chunk (for convergence studies)."""
+    values) for every chunk (for convergence studies). ``bounded``: score is called with
+    ``floor=`` the best value so far (-inf at first) and may give -inf to candidates it
+    proves cannot reach it (harness.quality.ranking_scores); not while recording, whose
+    studies read every candidate's value."""
     clock = Stopwatch(problem.time_budget_s)
     belief = problem.belief
     if belief.mean_shape.is_empty:
@@ -32,10 +35,13 @@ def search(problem: Problem, rng: np.random.Generator, count: int, angular_noise
     clock.lap("setup")
     best, best_key, trace, done = 0, (-np.inf, -np.inf), [], 0
     status = "ok"
+    bounded = bounded and record is None
     for start in range(0, len(grasps), CHUNK):
-        values, tie = (np.asarray(a, dtype=float) for a in score(grasps[start:start + CHUNK], state))
+        chunk = grasps[start:start + CHUNK]
+        scored = score(chunk, state, floor=best_key[0]) if bounded else score(chunk, state)
+        values, tie = (np.asarray(a, dtype=float) for a in scored)
         if record is not None:
-            record.append((clock.elapsed(), grasps[start:start + CHUNK], values))
+            record.append((clock.elapsed(), chunk, values))
         k = int(np.lexsort((-tie, -values))[0])
         if (values[k], tie[k]) > best_key:
             best, best_key = start + k, (float(values[k]), float(tie[k]))

@@ -533,7 +533,7 @@ plan = bandit.plan(problem, stream(4, "marker", "pinned"))
 scores = []
 gpp = GPP(candidates=30, samples=400)
 gpp._score = lambda grasps, state, score=gpp._score: scores.append(score(grasps, state)) or scores[-1]
-choice = gpp.plan(problem, stream(4, "marker", "pinned"))
+choice = gpp.plan(problem, stream(4, "marker", "pinned"), record=[])  # recording: every candidate judged
 p_f = np.concatenate([s[0] for s in scores])
 fc = np.concatenate([s[1] for s in scores])
 print(json.dumps({"successes": (np.abs(bandit.arms_.successes - np.round(p_f * 400))).max().item(),

@@ -216,6 +216,23 @@ def test_gp_gpis_opt_finds_a_secure_grasp_on_the_rectangle(beliefs):
         assert est.p_f >= 0.95, (seed, est)
 
 
+@pytest.mark.parametrize("quality", ["lift", "force_closure"])
+def test_gp_p_bounded_search_picks_what_judging_every_candidate_on_every_draw_picks(beliefs, quality):
+    """gp-p drops candidates that provably cannot beat its best so far
+    (harness.quality.ranking_scores with a floor); recording a trace turns that off, so
+    every candidate is judged on every draw. Both pick the same grasp with the same
+    estimate, on scenes whose candidates spread (the stapler, the tape)."""
+    for name in ("stapler", "tape"):
+        problem = Problem.for_belief(beliefs(name))
+        planner = GPP(samples=300, candidates=30, quality=quality)
+        record: list = []
+        every = planner.plan(problem, stream(2, name, "bounded"), record=record)
+        bounded = planner.plan(problem, stream(2, name, "bounded"))
+        values = np.concatenate([v for _, _, v in record])
+        assert np.isfinite(values).all() and values.min() < bounded.estimate - 0.1, values
+        assert bounded.grasp == every.grasp and bounded.estimate == every.estimate, name
+
+
 def test_planners_report_a_trace_and_their_work(beliefs):
     problem = Problem.for_belief(beliefs("disk"))
     for planner in (MeanShape(), GPP(samples=200, candidates=20), GPGPISOpt(), GPBandit()):

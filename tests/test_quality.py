@@ -12,7 +12,8 @@ from scipy.stats import binom
 from harness.belief import build_belief
 from harness.grasp import Grasp, find_contacts
 from harness.quality import (FAILURE_REASONS, PLANAR_REASONS, POOL_BLOCK, DrawPool, within_opening, default_streams,
-                             draw_evaluation, estimate_p_f, evaluate_draws, evaluate_pairs, wilson_interval)
+                             draw_evaluation, estimate_p_f, evaluate_draws, evaluate_pairs, ranking_scores,
+                             wilson_interval)
 from harness.scene import load_scene
 from harness.seeding import stream
 from harness.settings import resolve
@@ -82,6 +83,32 @@ def test_pairs_of_grasps_and_draws_are_judged_as_on_the_full_grid(rectangle):
     for name in ("closure", "lifted", "reason", "pivots", "ferrari_canny", "lift_chance"):
         np.testing.assert_array_equal(getattr(pairs, name), getattr(grid, name)[which, draw], err_msg=name)
     assert (~grid.closure).any() and grid.closure.any()
+
+
+@pytest.mark.parametrize("lift", [True, False])
+def test_ranking_with_a_floor_drops_only_grasps_that_cannot_win(rectangle, lift):
+    """The bounded ranking (a floor) against judging every grasp on every draw: each grasp
+    it keeps has the very score and tie-break, each it drops scores below the bar (the
+    floor, or the best score of the set), so the pick is the same; and with a floor it does
+    drop some (grasps through the centre far off the rectangle's axes, an off-centre one)."""
+    _, draws = rectangle
+    grasps = np.stack([through_centre(a).array for a in (0, 5, 20, 35, 50, 65, 80, 90)]
+                      + [Grasp((-0.045, y), (0.045, y)).array for y in (0.004, 0.012, 0.018)])
+    s = settings(0.004)
+    score, tie = ranking_scores(grasps, draws, s, lift)
+    assert np.isfinite(score).all() and 0 <= score.min() < score.max() <= 1
+    best = int(np.lexsort((-tie, -score))[0])
+    for floor in (-np.inf, 0.8, float(score[best])):
+        bounded, bounded_tie = ranking_scores(grasps, draws, s, lift, floor=floor)
+        kept = np.isfinite(bounded)
+        np.testing.assert_array_equal(bounded[kept], score[kept])
+        np.testing.assert_array_equal(bounded_tie[kept], tie[kept])
+        assert (score[~kept] < max(floor, score.max())).all()
+        assert np.isneginf(bounded_tie[~kept]).all()
+        assert int(np.lexsort((-bounded_tie, -bounded))[0]) == best
+        # Without a floor the set's own bar acts only late (a grasp with no chance on the
+        # first 500 draws may still reach 0.5); with one, the grasps well below it go.
+        assert (~kept).sum() >= (0 if floor == -np.inf else 3), (floor, score)
 
 
 def test_a_draw_pool_holds_the_same_draws_as_draw_evaluation(rectangle):
