@@ -53,3 +53,34 @@ def test_the_reproducibility_record_names_versions_blas_grid_and_platform():
     assert record["blas"] and all(b["internal_api"] and b["version"] and b["num_threads"] >= 1 for b in record["blas"])
     assert record["cell_blas_threads"] == [1] and record["canonical_grid_m"] == GRID
     assert record["python"].count(".") == 2 and record["platform"]["machine"]
+
+
+def test_the_manifest_reads_git_without_rewriting_the_index(tmp_path):
+    """A plain `git status` on a checkout whose files' stat data changed rewrites
+    .git/index (under .git/index.lock, which a killed run would leave behind); the
+    manifest's read must not. Checked against git itself: the plain command does rewrite
+    it here, the manifest's leaves it as it was and still sees the commit and a clean tree."""
+    from harness.manifest import git_state
+
+    def git(*args):
+        subprocess.run(["git", "-C", str(tmp_path), *args], check=True, capture_output=True,
+                       env={**os.environ, "GIT_AUTHOR_NAME": "t", "GIT_AUTHOR_EMAIL": "t@t", "GIT_COMMITTER_NAME": "t",
+                            "GIT_COMMITTER_EMAIL": "t@t"})
+
+    git("init", "-q")
+    (tmp_path / "a.txt").write_text("a\n")
+    git("add", "a.txt")
+    git("commit", "-q", "-m", "a")
+    index = tmp_path / ".git" / "index"
+
+    def touch_and_read(read):
+        os.utime(tmp_path / "a.txt", ns=(index.stat().st_mtime_ns + 5_000_000_000,) * 2)
+        before = index.read_bytes()
+        out = read()
+        return out, index.read_bytes() != before
+
+    commit_dirty, rewritten = touch_and_read(lambda: git_state(tmp_path))
+    assert commit_dirty[0] and len(commit_dirty[0]) == 40 and commit_dirty[1] is False
+    assert not rewritten
+    _, rewritten = touch_and_read(lambda: git("status", "--porcelain"))
+    assert rewritten, "plain git status did not refresh the index: the check above proves nothing"
