@@ -401,8 +401,8 @@ def estimate_p_f(grasps, draws: EvaluationDraws, settings: GraspSettings, lift: 
 #: A call's fixed cost (the push's and the squeeze's steps, each a contact search of about
 #: 1 ms however few its draws) makes many small blocks dear: on five of make eval's cells
 #: gp-p-lift took 0.47 of its time with these ends, 0.56 with 100 and 400, 0.66 with a
-#: block every 100 draws; on all 30 cells of make eval, 0.55 (2026-11-29; the plans the
-#: same with every choice: docs/planners.md, "Helpers").
+#: block every 100 draws (2026-11-29; the plans the same with every choice:
+#: docs/planners.md, "Helpers").
 RANK_ENDS = (100, 250, 500)
 #: A grasp is dropped only when even a chance of 1 on every draw left would keep its score
 #: this far below the bar: the sums' rounding (about 1e-13 over 1000 draws) cannot make it
@@ -419,16 +419,17 @@ def ranking_scores(grasps, draws: EvaluationDraws, settings: GraspSettings, lift
     finalists.
 
     ``floor`` (the best score seen so far, or -inf) asks only for the winner: the grasps
-    are judged block by block of draws (RANK_ENDS), and after each block a grasp whose score could
-    not reach the bar even with a chance of 1 on every draw left is dropped (its score and
-    tie-break are -inf). The bar is the floor or the score some grasp of the set is sure
-    of already (its chances so far over every draw: a chance is never below 0), whichever
-    is higher, less RANK_SLACK. Every grasp not dropped gets the very score and tie-break
-    it gets without a floor (each pair is judged as on the whole grid, evaluate_pairs; each
-    row reduced alike), so the winner, its score and every tie are the same: an exact
-    branch and bound, which spares the draws of grasps that lose early (most of a random
-    candidate set's, and their draws out of force closure are the costly ones: the push and
-    the squeeze)."""
+    are judged block by block of draws (RANK_ENDS), and after each block a grasp whose
+    score could not reach the bar even with a chance of 1 on every draw left is dropped
+    (its score and tie-break are -inf). The bar is the floor or the score some grasp of
+    the set is sure of already (its chances so far over every draw: a chance is never
+    below 0), whichever is higher, less RANK_SLACK; without a floor, the grasp ahead after
+    the first block is judged on every draw at once, so that its score is the bar. Every
+    grasp not dropped gets the very score and tie-break it gets without a floor (each pair
+    is judged as on the whole grid, evaluate_pairs; each row reduced alike), so the winner,
+    its score and every tie are the same: an exact branch and bound, which spares the
+    draws of grasps that lose early (most of a random candidate set's, and their draws out
+    of force closure are the costly ones: the push and the squeeze)."""
     if floor is None or len(draws) <= RANK_ENDS[0]:
         if lift:
             outcomes = evaluate_draws(grasps, draws, settings)
@@ -439,20 +440,35 @@ def ranking_scores(grasps, draws: EvaluationDraws, settings: GraspSettings, lift
     g, n = len(starts), len(draws)
     chance, fc = np.zeros((g, n)), np.zeros((g, n))
     alive = np.ones(g, dtype=bool)
-    ends = [e for e in RANK_ENDS if e < n] + [n]
-    for lo, hi in zip([0] + ends[:-1], ends):
-        rows = np.flatnonzero(alive)
-        if len(rows) == 0:  # every grasp below the floor
-            break
+    judged = np.zeros(g, dtype=np.int64)  # each grasp's draws judged so far (a prefix)
+    floor = float(floor)
+
+    def judge_rows(rows, lo, hi):
         grasp_of, draw_of = np.repeat(rows, hi - lo), np.tile(np.arange(lo, hi), len(rows))
         out = evaluate_pairs(starts[grasp_of], draw_of, draws, settings, lift)
         chance[grasp_of, draw_of] = out.lift_chance if lift else out.closure
         fc[grasp_of, draw_of] = out.ferrari_canny
+        judged[rows] = hi
+
+    ends = [e for e in RANK_ENDS if e < n] + [n]
+    for k, (lo, hi) in enumerate(zip([0] + ends[:-1], ends)):
+        rows = np.flatnonzero(alive & (judged < hi))
+        if len(rows):
+            judge_rows(rows, lo, hi)
         if hi == n:
             break
-        known = chance[rows, :hi].sum(axis=1)
-        bar = max(float(floor), float(known.max()) / n) - RANK_SLACK
-        alive[rows[(known + (n - hi)) / n < bar]] = False
+        live = np.flatnonzero(alive)
+        if len(live) == 0:  # every grasp below the floor
+            break
+        known = chance[live].sum(axis=1)
+        if k == 0 and floor == -np.inf:
+            # No floor yet (gp-p's first chunk): the grasp ahead after the first block is
+            # judged on every draw now, and its score is the bar.
+            lead = live[int(np.argmax(known))]
+            judge_rows(np.array([lead]), hi, n)
+            known[live == lead] = chance[lead].sum()
+        bar = max(floor, float(known.max()) / n) - RANK_SLACK
+        alive[live[(known + (n - judged[live])) / n < bar]] = False
     score, tie = np.full(g, -np.inf), np.full(g, -np.inf)
     kept = chance[alive]
     # The rows as the whole grid reduces them: P_L's mean, P_F's count over n.
