@@ -9,7 +9,8 @@ it, so this module opens each cell again exactly as the experiment opened it (th
 seed, realisation, settings and number of draws, :func:`harness.pipeline.cell_draws`:
 the GP's shape samples depend on how many are drawn) and judges each executed plan on
 the first posterior-trials draws with the lift model's quantities kept
-(:data:`harness.quality.LIFT_INPUTS`). Every row's verdict is checked against the one
+(:data:`harness.quality.LIFT_INPUTS`) and how the plates settled it on the table
+(:data:`harness.quality.SETTLE_INPUTS`, ``settled`` as its name). Every row's verdict is checked against the one
 the ledger recorded during the run (runs recorded before the ledger kept verdicts are
 not checked); a mismatch (a scene file changed since the run, another version of the
 model, or, from a script, numeric code paths other than the run's: a draw on a knife
@@ -34,12 +35,13 @@ KEYS = ("scene", "realisation", "planner", "trial", "outcome", "pivot", "verdict
 def trial_draws(out_dir: Path, data: dict | None = None) -> pd.DataFrame:
     """One row per posterior trial of the latest experiment in ``out_dir``: its keys, its
     outcome and the angle it turned in the gripper (``pivot``, rad), its draw's verdict
-    (harness.pipeline.verdict_label) and the lift model's quantities on that draw (NaN
-    where the plates were not in force closure). Raises InputError when a verdict
-    recomputed here is not the one the ledger recorded."""
+    (harness.pipeline.verdict_label), the lift model's quantities on that draw (NaN
+    where the plates were not in force closure) and how the plates settled it (the push's
+    and the squeeze's turns, the slide, and ``settled``: one of harness.quality.SETTLED).
+    Raises InputError when a verdict recomputed here is not the one the ledger recorded."""
     from harness import pipeline
     from harness.config import ExperimentConfig
-    from harness.quality import LIFT_INPUTS, evaluate_draws
+    from harness.quality import LIFT_INPUTS, SETTLE_INPUTS, SETTLED, evaluate_draws
     from harness.report import load
     from harness.tasks import scene_of, settings_of
 
@@ -76,8 +78,10 @@ def trial_draws(out_dir: Path, data: dict | None = None) -> pd.DataFrame:
                 trial = post.loc[key + (k,)] if key + (k,) in post.index else None
                 rows.append((name, realisation, plan["planner"], k,
                              None if trial is None else trial.outcome, np.nan if trial is None else trial.pivot,
-                             verdicts[k], *(float(out.lift_inputs[q][0, k]) for q in LIFT_INPUTS)))
-    return pd.DataFrame(rows, columns=[*KEYS, *LIFT_INPUTS])
+                             verdicts[k], *(float(out.lift_inputs[q][0, k]) for q in LIFT_INPUTS),
+                             *(float(out.lift_inputs[q][0, k]) for q in SETTLE_INPUTS[:-1]),
+                             SETTLED[int(out.lift_inputs["settled"][0, k])]))
+    return pd.DataFrame(rows, columns=[*KEYS, *LIFT_INPUTS, *SETTLE_INPUTS])
 
 
 def _why_different(data: dict) -> str:

@@ -199,7 +199,8 @@ class DrawOutcomes:
     (harness.push: the lift then judges another grasp than P_F's; None when the lift
     was not judged). ``lift_inputs``, when asked for (:func:`evaluate_draws`), holds the
     lift model's inputs and intermediates per draw (:data:`LIFT_INPUTS`; NaN where the
-    plates were not in force closure, so the lift was not judged)."""
+    plates were not in force closure, so the lift was not judged) and how the plates
+    settled each draw (:data:`SETTLE_INPUTS`, every draw)."""
 
     closure: np.ndarray
     lifted: np.ndarray | None
@@ -243,6 +244,19 @@ class DrawOutcomes:
 #: edge): lifted where the lever sum >= demand x max(clear_cos, release_cos).
 LIFT_INPUTS = ("weight", "distance", "demand", "lever_sum", "largest_lever_sum", "reach", "hang_gap", "friction",
                "load_share", "edge", "peak_demand", "clear_cos", "release_cos")
+#: How the plates settled each draw on the table before the lift (harness.push,
+#: harness.squeeze), which ``evaluate_draws(..., lift_inputs=True)`` returns beside
+#: LIFT_INPUTS and for every draw: the push's turn of the object before the second plate
+#: arrived (rad, counter-clockwise positive), the squeeze's turn (rad, 0 where it did not
+#: turn the draw into closure) and the slide across the closing line (m, 0 where there was
+#: none), and the settling as a code (:data:`SETTLED`).
+SETTLE_INPUTS = ("push_turn", "squeeze_turn", "slide", "settled")
+#: The codes of SETTLE_INPUTS' ``settled``: not settled (out of force closure, or the
+#: contacts failed), in force closure at the contacts after the push, turned into it by
+#: the squeeze, slid by it (into closure, or to where the walls' pushes cancel: held in the
+#: plane), and held in the plane where it was (neither a couple nor a push across the
+#: closing line).
+SETTLED = ("none", "closure", "turn", "slide", "held")
 
 
 def evaluate_draws(grasps, draws: EvaluationDraws, settings: GraspSettings, lift: bool = True,
@@ -338,10 +352,25 @@ def _judge(g1, g2, field, draws: EvaluationDraws, settings: GraspSettings, lift:
             found = _lift_inputs(verdict, reach, gamma[held], settings)
             for name in LIFT_INPUTS:
                 inputs[name][held] = found[name]
+        if lift:
+            inputs |= _settle_inputs(judged, in_closure, settled, push)
         inputs = {name: v.reshape(shape) for name, v in inputs.items()}
     return DrawOutcomes(closure.reshape(shape), lifted.reshape(shape) if lift else None, reason.reshape(shape),
                         pivots.reshape(shape), quality.reshape(shape), chance.reshape(shape) if lift else None,
                         squeezed.reshape(shape), inputs, pushed.reshape(shape) if lift else None)
+
+
+def _settle_inputs(contacts: Contacts, closure, settled, pushed) -> dict:
+    """SETTLE_INPUTS of every draw, from the contacts after the push, their force closure,
+    the squeeze and the push."""
+    code = np.zeros(len(closure))
+    moved = settled.squeezed & ~closure
+    code[moved] = SETTLED.index("held")
+    code[moved & (settled.shift > 0)] = SETTLED.index("slide")
+    code[moved & (settled.turn > 0)] = SETTLED.index("turn")
+    code[closure & (contacts.status == OK)] = SETTLED.index("closure")
+    return {"push_turn": np.asarray(pushed.turn, dtype=float).copy(), "squeeze_turn": settled.turn.copy(),
+            "slide": settled.shift.copy(), "settled": code}
 
 
 def _lift_inputs(verdict, reach, friction, settings: GraspSettings) -> dict:
@@ -351,10 +380,12 @@ def _lift_inputs(verdict, reach, friction, settings: GraspSettings) -> dict:
     from harness.lift import clearance
 
     reach, friction = np.asarray(reach, dtype=float), np.asarray(friction, dtype=float)
+    with np.errstate(divide="ignore"):  # frictionless jaws: an infinite share
+        share = settings.load_factor * verdict.weight / (2.0 * friction * settings.force)
     return {"weight": verdict.weight, "distance": verdict.distance, "demand": verdict.demand,
             "lever_sum": verdict.lever, "largest_lever_sum": verdict.largest_lever, "reach": reach,
             "hang_gap": clearance(settings) - reach, "friction": friction,
-            "load_share": settings.load_factor * verdict.weight / (2.0 * friction * settings.force),
+            "load_share": share,
             "edge": verdict.edge.astype(float), "peak_demand": verdict.peak_demand, "clear_cos": verdict.clear_cos,
             "release_cos": verdict.release_cos}
 

@@ -326,3 +326,51 @@ def test_bench_lifts_slide_cases_judged_by_the_model():
         out = evaluate_draws(case.grasp(offset), draws, settings)
         assert out.closure.mean() == pytest.approx(p_f, abs=0.02)
         assert out.lifted.mean() == pytest.approx(p_l, abs=0.02)
+
+
+def _draws_on(fields: SDFBatch, n: int) -> EvaluationDraws:
+    """n identical draws of one field, no approach noise, friction as the settings say."""
+    return EvaluationDraws(SDFBatch(GRID, np.repeat(fields.values, n, axis=0),
+                                    np.repeat(np.stack([fields.gx, fields.gy], axis=-1), n, axis=0)),
+                           np.zeros((n, 2, 2)), np.zeros(n), np.full((n, 2), 0.5), 0.05)
+
+
+def test_the_draws_say_how_the_plates_settled_them(ellipse, ring):
+    """evaluate_draws(..., lift_inputs=True) reports per draw how the plates settled it
+    (harness.quality.SETTLE_INPUTS, as `report --draws` writes them): the ellipse 4 degrees
+    off its minor axis is in force closure at once; 20 degrees off, the squeeze turns it
+    by the turn the squeeze itself finds (its own test above checks that turn against
+    judging every turned grasp); the ring gripped 8 mm off its radial line slides by the
+    slide the squeeze finds with the quality's slide limit; at mu = 0 the square gripped corner
+    to corner (the test above) is held in the plane where it is: no couple, no push across.
+    The push turns none of them."""
+    from harness.quality import SETTLE_INPUTS, SETTLED
+    from harness.squeeze import SLIDE_LIMIT
+
+    settings = replace(resolve(load_scene("disk"), {"sigma_g": 0.0, "friction": 0.2}), density=1.0)
+    grasps = np.stack([np.concatenate(jaws(math.radians(a)), axis=0) for a in (4.0, 20.0)])
+    out = evaluate_draws(grasps, _draws_on(ellipse, 2), settings, lift_inputs=True).lift_inputs
+    assert set(SETTLE_INPUTS) <= set(out)
+    assert [SETTLED[int(c)] for c in out["settled"][:, 0]] == ["closure", "turn"]
+    _, _, direct = run(ellipse, math.radians(20.0), 0.2)
+    assert out["squeeze_turn"][1, 0] == pytest.approx(direct.turn[0], abs=1e-12) and direct.turn[0] > 0
+    assert out["squeeze_turn"][0, 0] == 0.0 and (out["slide"] == 0.0).all()
+    np.testing.assert_allclose(out["push_turn"], 0.0, atol=1e-12)
+
+    g1, g2 = rim(0.008)
+    contacts, closed = closes(ring, g1, g2, 0.2)
+    direct = squeeze(ring, g1, g2, 0, contacts, closed, 0.2, JAW, 0.05, slide_limit=SLIDE_LIMIT)
+    ringed = evaluate_draws(np.concatenate(rim(0.008))[None], _draws_on(ring, 2), settings,
+                            lift_inputs=True).lift_inputs
+    assert [SETTLED[int(c)] for c in ringed["settled"][0]] == ["slide", "slide"]
+    np.testing.assert_allclose(ringed["slide"][0], direct.shift[0], atol=1e-12)
+    assert direct.shift[0] > 0 and (ringed["squeeze_turn"] == 0.0).all()
+
+    frictionless = replace(settings, friction=0.0)
+    square = shapely.affinity.rotate(shapely.Polygon([(-0.015, -0.015), (0.015, -0.015), (0.015, 0.015),
+                                                      (-0.015, 0.015)]), 45.0, origin=(0, 0))
+    fields = SDFBatch(GRID, grid_sdf(square, GRID)[None], grid_sdf_gradient(square, GRID)[None])
+    held = evaluate_draws(np.array([[[0.0, -0.045], [0.0, 0.045]]]), _draws_on(fields, 2), frictionless,
+                          lift_inputs=True).lift_inputs
+    assert [SETTLED[int(c)] for c in held["settled"][0]] == ["held", "held"]
+    assert (held["squeeze_turn"] == 0.0).all() and (held["slide"] == 0.0).all()
