@@ -252,10 +252,12 @@ LIFT_INPUTS = ("weight", "distance", "demand", "lever_sum", "largest_lever_sum",
 #: none), and the settling as a code (:data:`SETTLED`).
 SETTLE_INPUTS = ("push_turn", "squeeze_turn", "slide", "settled")
 #: The codes of SETTLE_INPUTS' ``settled``: not settled (out of force closure, or the
-#: contacts failed), in force closure at the contacts after the push, turned into it by
-#: the squeeze, slid by it (into closure, or to where the walls' pushes cancel: held in the
-#: plane), and held in the plane where it was (neither a couple nor a push across the
-#: closing line).
+#: contacts failed), in force closure at the contacts after the push, turned by the
+#: squeeze (into closure, or until another wall met a plate's side: held there), slid by
+#: it (into closure, to where the walls' pushes cancel, or until another wall met a
+#: plate's side: held in the plane), and held in the plane where it was (neither a couple
+#: nor a push across the closing line, or another wall met a plate's side at the first
+#: step).
 SETTLED = ("none", "closure", "turn", "slide", "held")
 
 

@@ -1,8 +1,10 @@
 """The plates' squeeze: a draw whose contacts are not in force closure turns on the table
 under the plates' couple until they are (or it cannot), and failing that slides across
 the closing line where the walls lean from the plates, until they are or until the
-walls' pushes across that line cancel, a position the plates hold in the plane; the
-lift model's planar step (docs/lift.md, "The squeeze" and "The slide")."""
+walls' pushes across that line cancel, a position the plates hold in the plane; a turn
+or a slide that carries another wall of the object into a plate's side stops there,
+held in the plane too. The lift model's planar step (docs/lift.md, "The squeeze" and
+"The slide")."""
 
 from __future__ import annotations
 
@@ -11,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from harness.grasp import OK, PATCH_DEPTH, Contacts, SDFBatch, find_contacts, plate_closure, turn_about
+from harness.grasp import OK, PATCH_DEPTH, TOO_WIDE, Contacts, SDFBatch, find_contacts, plate_closure, turn_about
 
 #: The turn is followed in steps of this angle (rad). With P_L of 1000 draws on the plans
 #: of the make eval before the squeeze (and the pushes at the first contacts), steps of 2,
@@ -46,10 +48,11 @@ SLIDE_LIMIT = 0.02
 @dataclass(frozen=True)
 class Squeeze:
     """Per draw (B,): whether the squeeze settled the object between the plates (brought
-    them into force closure, or slid the object to where the walls' pushes across the
-    closing line cancel: held in the plane), the turn (rad) or the slide (m) that did (0
-    where it did not) and the contacts where it stopped (the first contacts for draws in
-    closure at once, or not settled): c1, c2, w1, w2, edge1, edge2."""
+    them into force closure, slid the object to where the walls' pushes across the
+    closing line cancel, or turned or slid it until another of its walls met a plate's
+    side: held in the plane), the turn (rad) or the slide (m) that did (0 where it did
+    not) and the contacts where it stopped (the first contacts for draws in closure at
+    once, or not settled): c1, c2, w1, w2, edge1, edge2."""
 
     squeezed: np.ndarray
     turn: np.ndarray
@@ -79,8 +82,9 @@ def squeeze(fields: SDFBatch, g1, g2, field_index, contacts: Contacts, closure, 
     turn the other way about it; the contacts are found again each ``step`` until the
     plates are in force closure (squeezed), the couple changes sign without closure (the
     width's local minimum reached out of closure: the squeeze holds it there) or vanishes,
-    a contact is lost (a plate slid off the object, or meets it within SQUEEZE_MARGIN of
-    where it starts looking), or the turn reaches ``limit`` (rad; float or (B,)). A draw
+    a contact is lost (a plate slid off the object), the step carries another part of the
+    object into a plate's side (blocked: held in the plane where the step before left it,
+    :func:`_settle`), or the turn reaches ``limit`` (rad; float or (B,)). A draw
     the turn does not bring into closure then slides from its first contacts
     (:func:`_slide`), up to
     ``slide_limit`` (m; 0 turns only), unless neither the couple nor the walls' push
@@ -99,6 +103,7 @@ def squeeze(fields: SDFBatch, g1, g2, field_index, contacts: Contacts, closure, 
     candidates = (contacts.status == OK) & ~np.asarray(closure, dtype=bool) & np.isfinite(com[:, 0])
     active = candidates & (turning != 0)
     last1, last2 = contacts.c1.copy(), contacts.c2.copy()
+    before = {name: getattr(contacts, name).copy() for name in _KEPT}
     angle = 0.0
     limit = np.broadcast_to(np.asarray(limit, dtype=float), (b,))
     while (active := active & (angle + step <= limit + 1e-12)).any():
@@ -108,11 +113,12 @@ def squeeze(fields: SDFBatch, g1, g2, field_index, contacts: Contacts, closure, 
         # about its centre of mass.
         h1, h2 = (turn_about(g[idx], com[idx], -turning[idx] * angle) for g in (g1, g2))
         u = (h2 - h1) / np.linalg.norm(h2 - h1, axis=1, keepdims=True)
-        found, h1, h2, closed, lost = _settle(fields, h1, u, idx, last1, last2, field_index, friction, com,
-                                              jaw_width, torque_scale, out)
+        found, h1, h2, closed, lost, blocked = _settle(fields, h1, u, idx, last1, last2, field_index, friction, com,
+                                                       jaw_width, torque_scale, out, before)
         reversed_ = ~lost & (_couple(*_pushes(found), h1, h2) != turning[idx])
         out.turn[idx[closed]] = angle
-        active[idx[closed | lost | reversed_]] = False
+        out.turn[idx[blocked]] = angle - step
+        active[idx[closed | lost | blocked | reversed_]] = False
     # Neither a couple nor a push across u at the first contacts: the plates' pushes
     # balance there, and the object stays where it is, held in the plane.
     balanced = candidates & (turning == 0) & (_across(contacts, g1, g2, PATCH_DEPTH / jaw_width) == 0)
@@ -131,7 +137,8 @@ def _slide(fields: SDFBatch, g1, g2, field_index, contacts: Contacts, active, fr
     through the closure test at each step. In the object's frame the jaws move the other
     way; the contacts are found again each
     SLIDE_STEP until the plates are in force closure (slid into it), the push across u
-    changes sign or vanishes, a contact is lost (the object slid out of the jaws) or the
+    changes sign or vanishes, a contact is lost (the object slid out of the jaws), another
+    wall meets a plate's side (held where the step before left it, :func:`_settle`) or the
     slide reaches ``limit``. Where the push changes sign or vanishes, the walls hold the
     object in the plane out of force closure: the plates' pushes along u balance there,
     any shift across u brings back a push towards it, and the lift asks the plates for
@@ -144,35 +151,53 @@ def _slide(fields: SDFBatch, g1, g2, field_index, contacts: Contacts, active, fr
     u = (g2 - g1) / np.linalg.norm(g2 - g1, axis=1, keepdims=True)
     across = np.column_stack([-u[:, 1], u[:, 0]])
     last1, last2 = contacts.c1.copy(), contacts.c2.copy()
+    before = {name: getattr(contacts, name).copy() for name in _KEPT}
     shift = 0.0
     while active.any() and shift + SLIDE_STEP <= limit + 1e-12:
         shift += SLIDE_STEP
         idx = np.flatnonzero(active)
         move = -(sense[idx] * shift)[:, None] * across[idx]
-        found, h1, h2, closed, lost = _settle(fields, g1[idx] + move, u[idx], idx, last1, last2, field_index,
-                                              friction, com, jaw_width, torque_scale, out)
-        stopped = ~lost & ~closed & (_across(found, h1, h2, flush) != sense[idx])
+        found, h1, h2, closed, lost, blocked = _settle(fields, g1[idx] + move, u[idx], idx, last1, last2,
+                                                       field_index, friction, com, jaw_width, torque_scale, out,
+                                                       before)
+        stopped = ~lost & ~blocked & ~closed & (_across(found, h1, h2, flush) != sense[idx])
         _keep(out, idx[stopped], found, stopped)
         out.shift[idx[closed | stopped]] = shift
-        active[idx[closed | lost | stopped]] = False
+        out.shift[idx[blocked]] = shift - SLIDE_STEP
+        active[idx[closed | lost | blocked | stopped]] = False
 
 
 def _settle(fields: SDFBatch, h1, u, idx, last1, last2, field_index, friction, com, jaw_width: float,
-            torque_scale: float, out: Squeeze):
+            torque_scale: float, out: Squeeze, before: dict):
     """One step of the squeeze for draws ``idx``, the first jaw moved (in the object's
     frame) to h1, closing along the unit vector u: the jaws are closed on the object, so
     each plate's search starts SQUEEZE_MARGIN outside its last contact (``last1``, ``last2``, updated here), not at
     the jaw's start. The draws now in force closure are squeezed, with these contacts,
-    into ``out``. Returns the contacts found, the plates' search starts, and which draws
-    closed and which lost a contact."""
+    into ``out``.
+
+    A search that starts inside the object means that the step carried another part of it
+    across the plate's side into its strip, deeper than the margin: a wall as steep as
+    that cannot push a plate back along u, so it runs into the plate's side, which stops
+    the turn or the slide. Such a draw is **blocked**: held in the plane where the step
+    before left it, with those contacts (``before``, the _KEPT fields, updated here with
+    every draw's contacts that were found), as the slide holds a draw where the walls'
+    pushes cancel. Returns the contacts found, the plates' search starts, and which draws
+    closed, which lost a contact (a plate slid off the object) and which were blocked."""
     t1 = np.einsum("ij,ij->i", last1[idx] - h1, u) - SQUEEZE_MARGIN
     t2 = np.einsum("ij,ij->i", last2[idx] - h1, u) + SQUEEZE_MARGIN
     h1, h2 = h1 + t1[:, None] * u, h1 + t2[:, None] * u
     found = find_contacts(fields, h1, h2, jaw_width, field_index=field_index[idx])
     closed, _ = plate_closure(found, friction[idx], com[idx], torque_scale, with_quality=False)
+    blocked = found.status == TOO_WIDE
+    out.squeezed[idx[blocked]] = True
+    for name in _KEPT:
+        getattr(out, name)[idx[blocked]] = before[name][idx[blocked]]
+    ok = found.status == OK
+    for name in _KEPT:
+        before[name][idx[ok]] = getattr(found, name)[ok]
     last1[idx], last2[idx] = found.c1, found.c2
     _keep(out, idx[closed], found, closed)
-    return found, h1, h2, closed, found.status != OK
+    return found, h1, h2, closed, ~ok & ~blocked, blocked
 
 
 def _keep(out: Squeeze, done, found: Contacts, which) -> None:

@@ -374,3 +374,74 @@ def test_the_draws_say_how_the_plates_settled_them(ellipse, ring):
                           lift_inputs=True).lift_inputs
     assert [SETTLED[int(c)] for c in held["settled"][0]] == ["held", "held"]
     assert (held["squeeze_turn"] == 0.0).all() and (held["slide"] == 0.0).all()
+
+
+def test_a_slide_that_runs_another_wall_into_a_plates_side_is_held_where_it_stopped():
+    """A wedge narrowing to +x (walls leaning 30 degrees from the plates, beyond mu = 0.3)
+    with a tooth hanging below its lower wall from x = 10 mm: gripped across at x = 0, the
+    walls push the wedge towards -x, so the jaws slide towards +x in its frame, until the
+    lower plate's strip (10 mm wide) would take in the tooth, whose wall is square to the
+    plate: it cannot push the plate back along the closing line, it runs into the plate's
+    side and stops the slide. The draw is held in the plane where the step before left it
+    (before this rule, the search starting inside the tooth counted as a lost contact and
+    the draw as out of closure). Checked against judging each shifted grasp on its own:
+    the step it stops at is the first whose lower search, from SQUEEZE_MARGIN below the
+    last contact, starts inside the tooth, and the held contacts are the shifted grasp's
+    own. On the wedge without its tooth the slide goes on past that point."""
+    from harness.grasp import OK, TOO_WIDE
+    from harness.squeeze import SLIDE_STEP, SQUEEZE_MARGIN, _across, _couple, _pushes
+
+    mu, lean = 0.3, math.tan(math.radians(30.0))
+
+    def lower(x):
+        return -0.012 + lean * x
+
+    def upper(x):
+        return 0.012 - lean * x
+
+    wedge = [(-0.03, lower(-0.03)), (0.010, lower(0.010)), (0.022, lower(0.022)), (0.022, upper(0.022)),
+             (-0.03, upper(-0.03))]
+    toothed = [(-0.03, lower(-0.03)), (0.010, lower(0.010)), (0.010, -0.03), (0.022, -0.03), (0.022, upper(0.022)),
+               (-0.03, upper(-0.03))]
+
+    def fields(outline):
+        shape = shapely.Polygon(outline)
+        return SDFBatch(GRID, grid_sdf(shape, GRID)[None], grid_sdf_gradient(shape, GRID)[None]), shape
+
+    def at(shift):
+        return np.array([[shift, -0.045]]), np.array([[shift, 0.045]])
+
+    tooth, shape = fields(toothed)
+    com = np.array(shape.centroid.coords[0])
+    g1, g2 = at(0.0)
+    contacts = find_contacts(tooth, g1, g2, JAW)
+    closed, _ = plate_closure(contacts, mu, com, 0.05)
+    assert not closed[0] and _couple(*_pushes(contacts), g1, g2)[0] == 0.0
+    assert _across(contacts, g1, g2, 0.0005 / JAW)[0] == 1.0  # the jaws move towards +x in the wedge's frame
+    # Each shifted grasp on its own: the lower plate's search from SQUEEZE_MARGIN below the
+    # contact of the shift before; the first that starts inside the tooth stops the slide.
+    shifts = np.arange(1, 8) * SLIDE_STEP
+    last = contacts
+    for shift in shifts:
+        h1, h2 = at(shift)
+        start = last.c1[0, 1] - SQUEEZE_MARGIN
+        probe = find_contacts(tooth, np.array([[shift, start]]), h2, JAW)
+        if probe.status[0] == TOO_WIDE:
+            held = shift - SLIDE_STEP
+            break
+        last = find_contacts(tooth, h1, h2, JAW)
+        assert last.status[0] == OK and not plate_closure(last, mu, com, 0.05)[0][0]
+    else:
+        raise AssertionError("the tooth never met the plate")
+    assert held > 0
+    out = squeeze(tooth, g1, g2, 0, contacts, closed, mu, JAW, 0.05, slide_limit=0.02)
+    assert out.squeezed[0] and out.turn[0] == 0.0
+    assert out.shift[0] == pytest.approx(held, abs=1e-9)
+    expected = find_contacts(tooth, *at(held), JAW)
+    np.testing.assert_allclose(out.c1[0], expected.c1[0], atol=1e-9)
+    np.testing.assert_allclose(out.c2[0], expected.c2[0], atol=1e-9)
+    plain, plain_shape = fields(wedge)
+    plain_contacts = find_contacts(plain, g1, g2, JAW)
+    plain_closed, _ = plate_closure(plain_contacts, mu, np.array(plain_shape.centroid.coords[0]), 0.05)
+    on = squeeze(plain, g1, g2, 0, plain_contacts, plain_closed, mu, JAW, 0.05, slide_limit=0.02)
+    assert not (on.squeezed[0] and on.shift[0] <= held + 1e-9)
