@@ -102,7 +102,6 @@ def squeeze(fields: SDFBatch, g1, g2, field_index, contacts: Contacts, closure, 
     turning = _couple(*_pushes(contacts), g1, g2)
     candidates = (contacts.status == OK) & ~np.asarray(closure, dtype=bool) & np.isfinite(com[:, 0])
     active = candidates & (turning != 0)
-    last1, last2 = contacts.c1.copy(), contacts.c2.copy()
     before = {name: getattr(contacts, name).copy() for name in _KEPT}
     angle = 0.0
     limit = np.broadcast_to(np.asarray(limit, dtype=float), (b,))
@@ -113,8 +112,8 @@ def squeeze(fields: SDFBatch, g1, g2, field_index, contacts: Contacts, closure, 
         # about its centre of mass.
         h1, h2 = (turn_about(g[idx], com[idx], -turning[idx] * angle) for g in (g1, g2))
         u = (h2 - h1) / np.linalg.norm(h2 - h1, axis=1, keepdims=True)
-        found, h1, h2, closed, lost, blocked = _settle(fields, h1, u, idx, last1, last2, field_index, friction, com,
-                                                       jaw_width, torque_scale, out, before)
+        found, h1, h2, closed, lost, blocked = _settle(fields, h1, u, idx, field_index, friction, com, jaw_width,
+                                                       torque_scale, out, before)
         reversed_ = ~lost & (_couple(*_pushes(found), h1, h2) != turning[idx])
         out.turn[idx[closed]] = angle
         out.turn[idx[blocked]] = angle - step
@@ -150,16 +149,14 @@ def _slide(fields: SDFBatch, g1, g2, field_index, contacts: Contacts, active, fr
     active = active & (sense != 0)
     u = (g2 - g1) / np.linalg.norm(g2 - g1, axis=1, keepdims=True)
     across = np.column_stack([-u[:, 1], u[:, 0]])
-    last1, last2 = contacts.c1.copy(), contacts.c2.copy()
     before = {name: getattr(contacts, name).copy() for name in _KEPT}
     shift = 0.0
     while active.any() and shift + SLIDE_STEP <= limit + 1e-12:
         shift += SLIDE_STEP
         idx = np.flatnonzero(active)
         move = -(sense[idx] * shift)[:, None] * across[idx]
-        found, h1, h2, closed, lost, blocked = _settle(fields, g1[idx] + move, u[idx], idx, last1, last2,
-                                                       field_index, friction, com, jaw_width, torque_scale, out,
-                                                       before)
+        found, h1, h2, closed, lost, blocked = _settle(fields, g1[idx] + move, u[idx], idx, field_index, friction,
+                                                       com, jaw_width, torque_scale, out, before)
         stopped = ~lost & ~blocked & ~closed & (_across(found, h1, h2, flush) != sense[idx])
         _keep(out, idx[stopped], found, stopped)
         out.shift[idx[closed | stopped]] = shift
@@ -167,24 +164,24 @@ def _slide(fields: SDFBatch, g1, g2, field_index, contacts: Contacts, active, fr
         active[idx[closed | lost | blocked | stopped]] = False
 
 
-def _settle(fields: SDFBatch, h1, u, idx, last1, last2, field_index, friction, com, jaw_width: float,
-            torque_scale: float, out: Squeeze, before: dict):
+def _settle(fields: SDFBatch, h1, u, idx, field_index, friction, com, jaw_width: float, torque_scale: float,
+            out: Squeeze, before: dict):
     """One step of the squeeze for draws ``idx``, the first jaw moved (in the object's
     frame) to h1, closing along the unit vector u: the jaws are closed on the object, so
-    each plate's search starts SQUEEZE_MARGIN outside its last contact (``last1``, ``last2``, updated here), not at
-    the jaw's start. The draws now in force closure are squeezed, with these contacts,
+    each plate's search starts SQUEEZE_MARGIN outside its last contact (``before``'s c1
+    and c2, the _KEPT fields of each draw's last contacts found, updated here), not at the
+    jaw's start. The draws now in force closure are squeezed, with these contacts,
     into ``out``.
 
     A search that starts inside the object means that the step carried another part of it
     across the plate's side into its strip, deeper than the margin: a wall as steep as
     that cannot push a plate back along u, so it runs into the plate's side, which stops
     the turn or the slide. Such a draw is **blocked**: held in the plane where the step
-    before left it, with those contacts (``before``, the _KEPT fields, updated here with
-    every draw's contacts that were found), as the slide holds a draw where the walls'
-    pushes cancel. Returns the contacts found, the plates' search starts, and which draws
+    before left it, with those contacts (``before``'s), as the slide holds a draw where
+    the walls' pushes cancel. Returns the contacts found, the plates' search starts, and which draws
     closed, which lost a contact (a plate slid off the object) and which were blocked."""
-    t1 = np.einsum("ij,ij->i", last1[idx] - h1, u) - SQUEEZE_MARGIN
-    t2 = np.einsum("ij,ij->i", last2[idx] - h1, u) + SQUEEZE_MARGIN
+    t1 = np.einsum("ij,ij->i", before["c1"][idx] - h1, u) - SQUEEZE_MARGIN
+    t2 = np.einsum("ij,ij->i", before["c2"][idx] - h1, u) + SQUEEZE_MARGIN
     h1, h2 = h1 + t1[:, None] * u, h1 + t2[:, None] * u
     found = find_contacts(fields, h1, h2, jaw_width, field_index=field_index[idx])
     closed, _ = plate_closure(found, friction[idx], com[idx], torque_scale, with_quality=False)
@@ -195,7 +192,6 @@ def _settle(fields: SDFBatch, h1, u, idx, last1, last2, field_index, friction, c
     ok = found.status == OK
     for name in _KEPT:
         before[name][idx[ok]] = getattr(found, name)[ok]
-    last1[idx], last2[idx] = found.c1, found.c2
     _keep(out, idx[closed], found, closed)
     return found, h1, h2, closed, ~ok & ~blocked, blocked
 
