@@ -44,7 +44,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from harness.grasp import OK, PATCH_DEPTH, Contacts, SDFBatch, find_contacts, plate_closure, replace_rows, turn_about
+from harness.grasp import (OK, PATCH_DEPTH, TOO_WIDE, Contacts, SDFBatch, find_contacts, plate_closure, replace_rows,
+                           turn_about)
 from harness.squeeze import SQUEEZE_LIMIT, Squeeze, squeeze
 
 #: The push is followed in steps of at most this length (m) of the plate's travel, about
@@ -73,14 +74,24 @@ class Push:
     """Per draw (B,): the jaw starts g1, g2 (B, 2) in the object's frame after the push (the
     executed starts where the object did not move), how far the pushing plate pushed
     (m, 0 where the plates arrive together), the object's turn about the vertical (rad,
-    counter-clockwise positive) and whether the push moved the closing line across the
-    object (its contacts must be found again)."""
+    counter-clockwise positive), whether the push moved the closing line across the
+    object (its contacts must be found again) and how far each plate had closed from its
+    start when the push ended (m; 0 where the object did not move)."""
 
     g1: np.ndarray
     g2: np.ndarray
     distance: np.ndarray
     turn: np.ndarray
     moved: np.ndarray
+    travel: np.ndarray
+
+    def plates(self, which) -> tuple[np.ndarray, np.ndarray]:
+        """Where the plates of draws ``which`` stand in the object's frame when the push
+        ends, each PUSH_MARGIN behind its face (B', 2), as the push's own searches start."""
+        g1, g2 = self.g1[which], self.g2[which]
+        u = (g2 - g1) / np.maximum(np.linalg.norm(g2 - g1, axis=1), 1e-300)[:, None]
+        behind = (self.travel[which] - PUSH_MARGIN)[:, None] * u
+        return g1 + behind, g2 - behind
 
 
 def twist(r, normal, direction, friction, spread):
@@ -194,7 +205,7 @@ def push(fields: SDFBatch, g1, g2, field_index, contacts: Contacts, friction, ja
     moved = ok & ((np.abs(turn) > 0) | (line > NEGLIGIBLE))
     new1 = np.where(moved[:, None], new1, g1)
     new2 = np.where(moved[:, None], new2, g2)
-    return Push(new1, new2, distance, turn, moved)
+    return Push(new1, new2, distance, turn, moved, np.where(moved, travel, 0.0))
 
 
 def push_and_squeeze(fields: SDFBatch, g1, g2, field, contacts: Contacts, closure, gamma, jaw: float, scale: float,
@@ -212,6 +223,14 @@ def push_and_squeeze(fields: SDFBatch, g1, g2, field, contacts: Contacts, closur
     if pushed.moved.any():
         rows = np.flatnonzero(pushed.moved)
         again = find_contacts(fields, pushed.g1[rows], pushed.g2[rows], jaw, field_index=field[rows])
+        # A plate's start may lie inside the object once it has turned: a start beside
+        # another wall, which the turn carried to where the plate no longer is (it closed
+        # past it). The plates then search from where they stand, as during the push.
+        inside = again.status == TOO_WIDE
+        if inside.any():
+            near = rows[inside]
+            again = replace_rows(again, np.flatnonzero(inside),
+                                 find_contacts(fields, *pushed.plates(near), jaw, field_index=field[near]))
         closure[rows], _ = plate_closure(again, gamma[rows], fields.center_of_mass[field[rows]], scale,
                                          with_quality=False)
         contacts = replace_rows(contacts, rows, again)

@@ -13,8 +13,8 @@ import pytest
 import shapely
 
 from harness.geometry import Grid, grid_sdf, grid_sdf_gradient
-from harness.grasp import SDFBatch, find_contacts
-from harness.push import PUSH_STEP, PUSH_TURN, push, twist
+from harness.grasp import OK, TOO_WIDE, SDFBatch, find_contacts
+from harness.push import PUSH_STEP, PUSH_TURN, TOUCH, push, twist
 from harness.quality import evaluate_draws
 
 JAW = 0.01
@@ -167,3 +167,31 @@ def test_the_oblique_end_grasp_of_the_controlled_case_is_lost_past_a_2_cm_push()
     assert min(p_l(oblique, d) for d in (0.0, 0.01)) > 0.95
     assert max(p_l(oblique, d) for d in (0.02, 0.03)) < 0.15
     assert min(p_l(square, d) for d in (0.0, 0.01, 0.02, 0.03)) > 0.95
+
+
+def test_a_plate_that_started_beside_a_wall_it_closed_past_is_found_where_it_stands():
+    """A C open to the left (a tail along the bottom, an arm along the top, a block on the
+    right; the tape's dispenser strip in make eval): the lower plate starts in the slot
+    0.6 mm above the tail and closes 20 mm up to the arm, off the centre of mass, and
+    pushes it before the upper plate arrives. The push carries the object away from the
+    plate's start, so in the object's frame that start, where the plate no longer is,
+    ends inside the tail: marching from it finds no contact. The plates are searched for
+    where they stand, and they stand on the arm: the lower plate's contact on the arm's
+    underside, at the plate's own travel from its start, the upper one on its top."""
+    from harness.push import push_and_squeeze
+
+    c_shape = shapely.union_all([shapely.box(-0.05, -0.03, 0.03, -0.02),  # the tail
+                                 shapely.box(-0.04, 0.0, 0.03, 0.02),  # the arm
+                                 shapely.box(-0.005, -0.03, 0.03, 0.02)])  # the block
+    fields = fields_of(c_shape)
+    g1, g2 = np.array([[-0.025, -0.0194]]), np.array([[-0.025, 0.045]])  # 19.4 and 25 mm from the arm
+    contacts = find_contacts(fields, g1, g2, JAW)
+    assert contacts.status[0] == OK and abs(contacts.c1[0, 1]) < 3e-4  # the arm's underside
+    out, closure, _, pushed_ = push_and_squeeze(fields, g1, g2, 0, contacts, np.zeros(1, bool), 0.5, JAW, 0.02)
+    assert pushed_.moved[0] and pushed_.distance[0] > 0.002 and abs(pushed_.turn[0]) > 0.01
+    assert find_contacts(fields, pushed_.g1, pushed_.g2, JAW).status[0] == TOO_WIDE  # the start's artefact
+    assert out.status[0] == OK
+    assert abs(out.c1[0, 1]) < 1e-3 and abs(out.c2[0, 1] - 0.02) < 1e-3  # the arm's faces
+    w = (pushed_.g2[0] - pushed_.g1[0]) / np.linalg.norm(pushed_.g2[0] - pushed_.g1[0])
+    assert (out.c1[0] - pushed_.g1[0]) @ w == pytest.approx(pushed_.travel[0], abs=TOUCH + 1e-4)
+    assert (pushed_.g2[0] - out.c2[0]) @ w == pytest.approx(pushed_.travel[0], abs=TOUCH + 1e-4)
