@@ -223,9 +223,10 @@ def push_and_squeeze(fields: SDFBatch, g1, g2, field, contacts: Contacts, closur
     if pushed.moved.any():
         rows = np.flatnonzero(pushed.moved)
         again = find_contacts(fields, pushed.g1[rows], pushed.g2[rows], jaw, field_index=field[rows])
-        # A plate's start may lie inside the object once it has turned: a start beside
-        # another wall, which the turn carried to where the plate no longer is (it closed
-        # past it). The plates then search from where they stand, as during the push.
+        # In the object's frame the pushing plate's start recedes behind it as the object
+        # goes, and a start beside another wall (a plate that started in a notch and
+        # closed out of it) can end inside that wall, where the plate no longer is. The
+        # plates then search from where they stand, as during the push.
         inside = again.status == TOO_WIDE
         if inside.any():
             near = rows[inside]
