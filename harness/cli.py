@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
@@ -54,8 +55,8 @@ _positive_int = _checked(int, lambda v: 1 <= v <= 1_000_000, "an integer from 1 
 _non_negative = _checked(float, lambda v: math.isfinite(v) and v >= 0, "a finite number >= 0")
 _positive_number = _checked(float, lambda v: math.isfinite(v) and v > 0, "a finite number > 0")
 _coordinate = _checked(float, math.isfinite, "a finite coordinate in metres")
-_sizes = _checked(lambda t: [int(v) for v in t.split(",")], lambda v: len(v) > 0,
-                  "comma-separated integers like 25,40,55")
+_sizes = _checked(lambda t: [int(v) for v in t.split(",")], lambda v: len(v) > 0 and all(8 <= m <= 1024 for m in v),
+                  "comma-separated grid sizes from 8 to 1024, like 25,40,55")
 _study_seeds = _checked(int, lambda v: 0 <= v <= 1000, "an integer from 0 to 1000")
 _study_candidates = _checked(int, lambda v: 1 <= v <= 10_000, "an integer from 1 to 10000")
 _draw_counts = _checked(lambda t: [float(v) for v in t.split(",")],
@@ -93,12 +94,17 @@ def _render(scene_arg: str, seed: int, out: Path) -> Path:
     from harness.scene import load_scene
     from harness.seeding import stream
 
+    from harness.outputs import output_folder, storage
+
     scene = load_scene(scene_arg)
+    output_folder(out.parent, "--out", "the pictures' folder")  # before any work: one line if it cannot be made
     belief = build_belief(scene, stream(seed, scene.name, 0, "sensor"))
     fig = scene_figure(belief, stream(seed, scene.name, 0, "picture"))
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
+    try:
+        with storage(out, "cannot write the picture"):
+            fig.savefig(out, dpi=110)
+    finally:
+        plt.close(fig)
     return out
 
 
@@ -186,12 +192,17 @@ def _simulate(args) -> int:
     from harness.physics.trace import Tracer
     from harness.protocol import Protocol
 
+    from harness.outputs import output_folder, storage
+
     scene, grasp, settings = _scene_and_grasp(args)
-    if args.frames is not None and Path(args.frames).exists() and not Path(args.frames).is_dir():
-        raise InputError("--frames", None, f"{args.frames} exists and is not a folder")
+    if args.frames is not None:  # made now, before any trial: one line if it cannot be
+        output_folder(Path(args.frames), "--frames", "the frames' folder")
     if args.trace is not None and (Path(args.trace).is_dir() or not Path(args.trace).parent.is_dir()):
         raise InputError("--trace", None, f"{args.trace} is a folder" if Path(args.trace).is_dir()
                          else f"{Path(args.trace).parent} is not a folder")
+    if args.trace is not None:
+        with storage(args.trace, "cannot write the trace"):
+            Path(args.trace).touch()
     if args.shapes == "posterior":
         # As many draws as eval's default analytic draws: trial i is eval's posterior trial i.
         draws = pipeline.cell_draws(pipeline.DRAWS, args.trials)
@@ -203,11 +214,13 @@ def _simulate(args) -> int:
     start = time.perf_counter()
     bar = tqdm(total=len(trials), unit="trial", disable=None, file=sys.stderr)
     tracer = Tracer() if args.trace else None
-    with make_runner(Protocol.of(args.engine)) as runner, bar:
+    frames = storage(args.frames, "cannot write the frames") if args.frames else contextlib.nullcontext()
+    with make_runner(Protocol.of(args.engine)) as runner, bar, frames:
         results = runner.run(trials, frames=Path(args.frames) if args.frames else None, progress=bar.update,
                              trace=tracer)
     if tracer is not None:
-        tracer.write(Path(args.trace))
+        with storage(args.trace, "cannot write the trace"):
+            tracer.write(Path(args.trace))
     summary = SimulationSummary(tuple(results), time.perf_counter() - start)
     out = summary.as_dict()
     if args.json:

@@ -11,6 +11,7 @@ import fnmatch
 import glob
 import hashlib
 import json
+import math
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
@@ -19,10 +20,14 @@ from harness.protocol import ENGINES, PAD_STIFFNESS
 from harness.scene import LIBRARY, library_names, load_scene, resolve
 from harness.toml_table import Table, read_toml
 
-#: Protocol fields a config may override: whether zero is allowed (else strictly positive).
-_PROTOCOL_KEYS = {"time_step": False, "lift_height": False, "lift_time": False, "hold_time": True,
-                  "shake_time": True, "shake_frequency": False, "shake_amplitude": True, "shake_turn": True,
-                  "table_friction": True}
+#: Protocol fields a config may override, with their ranges (low, high, low end open). The
+#: bounds keep a trial finite and the motion physical: a step from 1e-4 s (20 times finer
+#: than Bullet's design step; the fidelity studies go 4 times finer) to 0.01 s, phases of
+#: at most 10 s, a lift of at most 1 m, a shake of at most 50 Hz, 0.5 m and pi rad.
+_PROTOCOL_KEYS = {"time_step": (1e-4, 0.01, False), "lift_height": (0.0, 1.0, True), "lift_time": (0.0, 10.0, True),
+                  "hold_time": (0.0, 10.0, False), "shake_time": (0.0, 10.0, False),
+                  "shake_frequency": (0.0, 50.0, True), "shake_amplitude": (0.0, 0.5, False),
+                  "shake_turn": (0.0, math.pi, False), "table_friction": (0.0, 10.0, False)}
 #: Grasp settings (harness.settings) an experiment may override, by the table that holds them.
 _SETTING_TABLES = {"evaluation": ("sigma_g", "friction", "friction_spread", "load_factor"),
                    "gripper": ("opening", "jaw_width", "sigma_g", "force", "closing_speed", "plate_height")}
@@ -162,8 +167,8 @@ def parse_config(data: dict, source: str, base_dir: Path, default_name: str = "e
 
     root = Table(data, "", source)
     name = root.string("name", default_name)
-    if not name or any(c in name for c in "/\\") or name.startswith("."):
-        raise root.error("name", f"'{name}' cannot name a results folder")
+    if not name or any(c in name for c in "/\\") or name.startswith(".") or not name.isprintable():
+        raise root.error("name", f"{name!r} cannot name a results folder")
     seed = root.integer("seed", 0, lo=0, hi=2**63 - 1)
     scenes = _scene_files(root, base_dir)
     realisations = root.integer("realisations", 3, lo=1, hi=1000)
@@ -176,14 +181,12 @@ def parse_config(data: dict, source: str, base_dir: Path, default_name: str = "e
     settings = _setting_overrides({"evaluation": ev, "gripper": root.table("gripper", required=False)})
 
     phys = root.table("physics", required=False)
-    protocol = {key: phys.number(key, None, lo=0.0, lo_open=not zero_ok)
-                for key, zero_ok in _PROTOCOL_KEYS.items() if key in phys.data}
+    protocol = {key: phys.number(key, None, lo=lo, hi=hi, lo_open=lo_open)
+                for key, (lo, hi, lo_open) in _PROTOCOL_KEYS.items() if key in phys.data}
     if "solver_iterations" in phys.data:
         protocol["solver_iterations"] = phys.integer("solver_iterations", None, lo=1, hi=10_000)
     if "body_refinement" in phys.data:
         protocol["body_refinement"] = phys.integer("body_refinement", None, lo=1, hi=8)
-    if "time_step" in protocol and protocol["time_step"] > 0.01:
-        raise phys.error("time_step", f"{protocol['time_step']} s is too coarse (at most 0.01 s)")
     for key in ("cone_friction", "table_hull", "convex_clipping"):
         if key in phys.data:
             protocol[key] = phys.boolean(key)
@@ -215,8 +218,10 @@ def parse_config(data: dict, source: str, base_dir: Path, default_name: str = "e
         except InputError as exc:
             raise InputError(source, f"{t.where}.{'params.' + exc.field if exc.field else 'name'}",
                              exc.message) from None
-        if not label or any(c in label for c in "/\\\n"):
-            raise t.error("label", f"'{label}' is not a usable label")
+        if not label or any(c in label for c in "/\\") or not label.isprintable():
+            raise t.error("label", f"{label!r} is not a usable label")
+        if label == "all":
+            raise t.error("label", "'all' is the tables' name for every planner pooled; give the entry another label")
         if label in {e.label for e in entries}:
             raise t.error("label", f"'{label}' is used twice (give each planner entry its own label)")
         entries.append(PlannerEntry(label, pname, params))
@@ -262,12 +267,15 @@ def _scene_files(root: Table, base_dir: Path) -> list[str]:
             raise root.error(f"scenes[{k}]", f"expected a scene name, glob or path, got {entry!r}")
         looks_like_path = entry.endswith(".toml") or "/" in entry
         if any(c in entry for c in "*?["):
-            if Path(entry).is_absolute():  # Path.glob takes relative patterns only
-                matches = sorted(p for p in glob.glob(entry) if Path(p).is_file())
-            elif looks_like_path:
-                matches = sorted(str(p) for p in base_dir.glob(entry) if p.is_file())
-            else:
-                matches = [str(LIBRARY / f"{n}.toml") for n in library_names() if fnmatch.fnmatch(n, entry)]
+            try:
+                if Path(entry).is_absolute():  # Path.glob takes relative patterns only
+                    matches = sorted(p for p in glob.glob(entry) if Path(p).is_file())
+                elif looks_like_path:
+                    matches = sorted(str(p) for p in base_dir.glob(entry) if p.is_file())
+                else:
+                    matches = [str(LIBRARY / f"{n}.toml") for n in library_names() if fnmatch.fnmatch(n, entry)]
+            except ValueError as exc:  # pathlib's word on a malformed pattern ('**' inside a name)
+                raise root.error(f"scenes[{k}]", f"'{entry}' is not a usable pattern: {exc}") from None
             if not matches:
                 raise root.error(f"scenes[{k}]", f"'{entry}' matches no scene")
         else:

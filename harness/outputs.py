@@ -35,7 +35,7 @@ _UMASK = os.umask(0o022)
 os.umask(_UMASK)
 
 
-def output_folder(path: Path, option: str = "--out") -> Path:
+def output_folder(path: Path, option: str = "--out", what: str = "the results folder") -> Path:
     """Create the folder (and its parents) for results; one line on failure."""
     path = Path(path)
     if path.exists() and not path.is_dir():
@@ -43,7 +43,7 @@ def output_folder(path: Path, option: str = "--out") -> Path:
     try:
         path.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        raise storage_error(exc, path, "cannot create the results folder") from None
+        raise storage_error(exc, path, f"cannot create {what}") from None
     return path
 
 

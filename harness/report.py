@@ -48,6 +48,7 @@ def load(out_dir: Path, config_hash: str | None = None) -> dict:
         runs = runs[runs.config_hash == key]
         out = {"hash": key, "runs": runs, "config": json.loads(runs.iloc[-1].config),
                "environment": json.loads(runs.iloc[-1].environment)}
+        _check_stored(out["config"], out["environment"], path)
         labels = {p["label"] for p in out["config"]["planners"]}
         for table in ("plans", "analytic", "trials"):
             rows = ledger.table(key, table)
@@ -55,6 +56,33 @@ def load(out_dir: Path, config_hash: str | None = None) -> dict:
             # planner a later config dropped (the config hash does not cover the planners).
             out[table] = rows[rows.planner.isin(labels)].reset_index(drop=True)
     return out
+
+
+def _check_stored(config, environment, path: Path) -> None:
+    """The stored run's config and environment have the structure the tables read (the
+    ledger checks its columns' types, not what the JSON inside them holds); one line
+    naming the field otherwise."""
+
+    def bad(field: str, what: str) -> InputError:
+        return InputError(str(path), f"runs.{field}", f"{what}: not a run this version can read")
+
+    if not isinstance(config, dict):
+        raise bad("config", f"a {type(config).__name__}, not a table")
+    if not isinstance(environment, dict):
+        raise bad("environment", f"a {type(environment).__name__}, not a table")
+    for key in ("seed", "realisations", "analytic_draws", "posterior_trials", "truth_trials"):
+        value = config.get(key)
+        if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+            raise bad(f"config.{key}", f"{value!r} is not a count")
+    scenes, planners = config.get("scenes"), config.get("planners")
+    if not isinstance(scenes, list) or not all(isinstance(x, str) for x in scenes):
+        raise bad("config.scenes", "not a list of scene files")
+    if not isinstance(planners, list) or not all(isinstance(x, dict) and isinstance(x.get("label"), str)
+                                                  and isinstance(x.get("name"), str) for x in planners):
+        raise bad("config.planners", "not a list of planner entries with a label and a name")
+    for key in ("physics", "settings"):
+        if not isinstance(config.get(key) or {}, dict):
+            raise bad(f"config.{key}", "not a table")
 
 
 def expected(config: dict) -> tuple[list[str], list[str], int]:

@@ -35,6 +35,8 @@ BORDER_CELLS = 2.0
 #: The shape's largest inscribed circle must have at least this radius, in cells.
 MIN_INSCRIBED_CELLS = 1.0
 #: A scene's name keys its plans and trials and names its figures: a file name's safe subset.
+#: The sensor's smallest noise std, in cells (harness.gpis draws in single precision).
+MIN_NOISE_CELLS = 0.01
 SAFE_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}")
 SAFE_NAME_RULE = "use 1 to 64 letters, digits, '.', '_' or '-', starting with a letter or digit"
 SHAPE_TYPES = ("polygon", "outline", "rectangle", "disk", "ring", "capsule", "union", "random")
@@ -115,10 +117,14 @@ def library_names() -> list[str]:
 
 def resolve(name_or_path: str) -> Path:
     """The file of a library scene name or a path; InputError when neither exists."""
+    if not name_or_path:
+        raise InputError("scene", None, "an empty name is neither a library scene nor a file")
     candidate = Path(name_or_path)
     if candidate.suffix == ".toml" or os.sep in name_or_path or candidate.exists():
         if not candidate.is_file():
-            raise InputError(name_or_path, None, "no such scene file")
+            what = ("is a folder, not a scene file" if candidate.is_dir() else
+                    "is not a regular file" if candidate.exists() else "no such scene file")
+            raise InputError(name_or_path, None, what)
         return candidate
     path = LIBRARY / f"{name_or_path}.toml"
     if not path.is_file():
@@ -160,6 +166,9 @@ def parse_scene(data: dict, source: str, base_dir: Path, default_name: str = "sc
         field = "name" if "name" in data else None
         raise root.error(field, f"scene name '{_printable(name)}' is not usable: {SAFE_NAME_RULE}"
                                 + ("" if field else " (it comes from the file name; set `name` in the file)"))
+    if name == "all":
+        raise root.error("name" if "name" in data else None,
+                         "scene name 'all' is the tables' name for every scene pooled; give the scene another name")
     description = root.string("description", "")
 
     g = root.table("grid")
@@ -173,7 +182,7 @@ def parse_scene(data: dict, source: str, base_dir: Path, default_name: str = "sc
     shape = _shape(root.table("shape"), cell, base_dir)
     _check_shape_on_grid(shape, grid, source)
 
-    sensor = _sensor(root.table("sensor", required=False), cell, base_dir)
+    sensor = _sensor(root.table("sensor", required=False), grid, base_dir)
     gpis = _gpis(root.table("gpis", required=False), cell, truncation)
 
     p = root.table("physics", required=False)
@@ -321,7 +330,7 @@ def _random_shape(t: Table, cell: float) -> Polygon:
     parameters, never on the scene's grid.
     """
     seed = t.integer("seed", lo=0, hi=2**63 - 1)
-    radius = t.length("radius", cell, lo=0.0)
+    radius = t.length("radius", cell, lo=1e-4, lo_open=False)  # from 0.1 mm: the lattice's cells stay finite
     # The lattice is periodic and 4R wide: beyond 2R its lowest modes, not the lengthscale,
     # set the correlation, while the filter's cost keeps growing with the lengthscale.
     lengthscale = t.length("lengthscale", cell, default=0.5 * radius, lo=0.0, hi=2.0 * radius)
@@ -369,8 +378,12 @@ def _check_shape_on_grid(shape: BaseGeometry, grid: Grid, source: str) -> None:
 # Sensor and GPIS sections
 
 
-def _sensor(t: Table, cell: float, base_dir: Path) -> SensorModel:
-    noise = t.length("noise", cell, default=0.5 * cell, lo=0.0, lo_open=True)
+def _sensor(t: Table, grid: Grid, base_dir: Path) -> SensorModel:
+    cell = grid.cell
+    # Readings' noise from a hundredth of a cell: far below it the GP's posterior is singular
+    # in the precision its samples are drawn in (at 1e-4 cells every posterior sample of
+    # a rectangle came out with no body the jaws could meet).
+    noise = t.length("noise", cell, default=0.5 * cell, lo=MIN_NOISE_CELLS * cell, lo_open=False)
     band = t.length("surface_band", cell, default=1.5 * cell, lo=0.0, lo_open=True)
     depth = t.length("interior_depth", cell, default=2.0 * cell, lo=0.0)
     keep = t.number("interior_keep", 1.0, lo=0.0, hi=1.0)
@@ -394,12 +407,16 @@ def _sensor(t: Table, cell: float, base_dir: Path) -> SensorModel:
         if kind == "transparent":
             params["depth"] = r.length("depth", cell, default=band, lo=0.0, lo_open=True)
             params["value"] = r.length("value", cell, default=0.5 * cell, lo=-100.0, hi=100.0)
-            params["noise"] = r.length("noise", cell, default=math.sqrt(3.0) * cell, lo=0.0, lo_open=True)
+            params["noise"] = r.length("noise", cell, default=math.sqrt(3.0) * cell, lo=MIN_NOISE_CELLS * cell,
+                                       lo_open=False)
         elif kind == "specular":
             params["noise"] = r.length("noise", cell, default=2.0 * cell, lo=0.0, lo_open=True)
             params["drop_probability"] = r.number("drop_probability", 0.5, lo=0.0, hi=1.0)
         r.finish()
         regions.append(Region(kind=kind, geometry=geom, **params))
+    occluded = [r.geometry for r in regions if r.kind == "occluded"]
+    if occluded and shapely.contains_xy(shapely.union_all(occluded), grid.points[:, 0], grid.points[:, 1]).all():
+        raise t.error("regions", "the occluded regions cover every cell of the grid: the sensor would see nothing")
     t.finish()
     return SensorModel(noise, band, depth, keep, tuple(regions))
 
@@ -415,7 +432,9 @@ def _half_plane(normal: np.ndarray, offset: float) -> Polygon:
 
 
 def _gpis(t: Table, cell: float, truncation: float) -> GPISSettings:
-    lengthscale = t.length("lengthscale", cell, default=2.7 * cell, lo=0.0, lo_open=True)
+    # From a tenth of a cell: a GP whose length scale is far below the cell is white noise on
+    # the grid, and its basis (harness.gpis) is not defined in the limit.
+    lengthscale = t.length("lengthscale", cell, default=2.7 * cell, lo=0.1 * cell, lo_open=False)
     settings = GPISSettings(
         lengthscale=lengthscale,
         scale=t.area("scale", cell, default=4.0 * cell**2),
@@ -425,7 +444,7 @@ def _gpis(t: Table, cell: float, truncation: float) -> GPISSettings:
         active_set=t.boolean("active_set", True),
         active_band=t.length("active_band", cell, default=max(min(2.5 * cell, truncation - 0.5 * cell), 0.5 * cell),
                              lo=0.0),
-        active_spacing=t.length("active_spacing", cell, default=lengthscale, lo=0.0, lo_open=True),
+        active_spacing=t.length("active_spacing", cell, default=lengthscale, lo=0.1 * cell, lo_open=False),
     )
     t.finish()
     return settings

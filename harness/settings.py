@@ -24,7 +24,7 @@ BOUNDS = {
     "jaw_width": (0.0, 10.0, True),
     "sigma_g": (0.0, 1.0, False),
     "force": (0.0, 1e4, True),
-    "closing_speed": (0.0, 10.0, True),
+    "closing_speed": (0.001, 10.0, False),  # from 1 mm/s: the closing's steps stay countable
     "plate_height": (0.0, 1.0, True),
     "thickness": (0.0, 1.0, True),
     "density": (1.0, 30000.0, False),

@@ -31,3 +31,13 @@ class ExitsInPlan(Planner):
 
     def plan(self, problem, rng):
         raise SystemExit(3)
+
+
+class Fixed(Planner):
+    """The same grasp on every belief, whatever its label: across the rectangle's middle,
+    a little off its centre (``Sleeps`` in faulty_planners plans through the centre)."""
+
+    name = "test-fixed"
+
+    def plan(self, problem, rng):
+        return Plan(Grasp((-0.045, 0.004), (0.045, -0.002)), "ok")

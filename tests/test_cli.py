@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import json
+import math
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
+from scipy import stats
 
 from harness.cli import main
 
@@ -47,6 +49,27 @@ def test_bad_command_line_gets_one_line_and_exit_code_2(capsys):
         assert len(err.strip().splitlines()) == 1 and err.startswith("gpis-harness: error: "), (argv, err)
 
 
+def test_output_paths_that_cannot_be_written_get_one_line_before_any_work(tmp_path, capsys):
+    """A frames folder, a trace file or a picture where one cannot be made: exit 2 and one
+    line naming the path, found before any trial runs (a trial would print its summary);
+    a trace that fails only when written (a full device) is one line too, and no summary."""
+    blocker = tmp_path / "a-file"
+    blocker.write_text("")
+    grasp = ["--grasp", "-0.045", "0", "0.045", "0", "--trials", "1", "--shapes", "truth"]
+    cases = [(["simulate", "rectangle", *grasp, "--frames", str(blocker / "frames")], str(blocker / "frames")),
+             (["simulate", "rectangle", *grasp, "--frames", str(blocker)], "--frames"),
+             (["scenes", "show", "rectangle", "--out", str(blocker / "x.png")], "--out"),
+             (["scenes", "render", "--out", str(blocker)], "--out")]
+    if Path("/dev/full").exists():  # writes there fail with ENOSPC
+        cases.append((["simulate", "rectangle", *grasp, "--trace", "/dev/full"], "/dev/full"))
+    for argv, named in cases:
+        assert main(argv) == 2, argv
+        captured = capsys.readouterr()
+        assert captured.out == "", argv
+        lines = captured.err.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith(f"gpis-harness: error: {named}"), (argv, lines)
+
+
 def test_bench_sampling_json_has_the_contracted_fields():
     proc = subprocess.run([sys.executable, "-m", "harness", "bench", "sampling", "--sizes", "20,25", "--json"],
                           capture_output=True, text=True, timeout=600, check=True)
@@ -56,7 +79,9 @@ def test_bench_sampling_json_has_the_contracted_fields():
         assert {"M", "fit_s", "fast_s", "exact_s", "peak_mb"} <= set(row)
         assert row["fast_s"] > 0 and row["exact_s"] > 0 and row["peak_mb"] > 0
     assert result["ratio_exact_over_fast_at_55"] is None  # M = 55 not measured here
-    assert isinstance(result["fast_growth_exponent"], float)
+    # Two sizes: the least-squares slope of log time on log M is the slope through both.
+    fast = [r["fast_s"] for r in result["rows"]]
+    assert result["fast_growth_exponent"] == pytest.approx(math.log(fast[1] / fast[0]) / math.log(25 / 20), abs=1e-9)
 
 
 def test_input_errors_survive_a_trip_between_processes():
@@ -78,6 +103,9 @@ def test_quality_json_holds_the_estimate_its_interval_and_failures(capsys):
             "squeezed", "ferrari_canny_mean"} <= set(out)
     assert out["samples"] == 300 and out["ci_low"] <= out["p_f"] <= out["ci_high"]
     assert out["p_l_ci_low"] <= out["p_l"] <= out["p_l_ci_high"]
+    for key, low, high in (("p_f", "ci_low", "ci_high"), ("p_l", "p_l_ci_low", "p_l_ci_high")):
+        wilson = stats.binomtest(round(out[key] * 300), 300).proportion_ci(method="wilson")  # scipy's own
+        assert (out[low], out[high]) == (pytest.approx(wilson.low, abs=1e-9), pytest.approx(wilson.high, abs=1e-9))
     assert out["p_l"] <= out["p_f"] + out["squeezed"] / 300
     planar = ("too_wide", "missed", "degenerate_normal", "friction_cone")
     assert set(out["failures"]) == set(planar) | {"weight_slip", "weight_torque", "edge_turn"}
@@ -120,6 +148,7 @@ def test_simulate_prints_the_json_contract_and_writes_frames(tmp_path, capsys):
     assert {"trials", "successes", "success_rate", "ci_low", "ci_high", "outcomes", "trials_per_s"} <= set(out)
     assert out["successes"] == 2 and out["success_rate"] == 1.0
     assert 0.0 < out["ci_low"] < 1.0 == out["ci_high"]
+    assert out["ci_low"] == pytest.approx(stats.binomtest(2, 2).proportion_ci(method="wilson").low, abs=1e-9)
     pictures = sorted(p.name for p in frames.glob("*.png"))
     assert pictures == ["1-placed.png", "2-closed.png", "3-lifted.png", "4-shaken.png"]
     assert all((frames / p).read_bytes()[:4] == b"\x89PNG" for p in pictures)

@@ -142,6 +142,17 @@ def test_planner_shifts_are_the_differences_of_differences(two_runs):
         assert row.difference_b == pytest.approx(db, abs=1e-12)
         assert row.shift == pytest.approx(db - da, abs=1e-12)
         assert row.shift_ci_low < row.shift < row.shift_ci_high
+        # The bootstrap's interval against the normal approximation of the paired shifts
+        # (per pair (scene, realisation, shapes, trial): B's difference less A's), within
+        # 15 % as for the differences above.
+        pairs = [(k[0], k[1], k[3], k[4]) for k in keys if k[2] == "gp-p" and row.shapes in (k[3], "all")]
+        index = {k: j for j, k in enumerate(keys)}
+        d = np.array([sum((1.0 if x[index[(s, r, pl, sh, i)]] == "success" else 0.0) * sign * side
+                          for x, side in ((b, 1.0), (a, -1.0)) for pl, sign in (("gp-p", 1.0), ("mean-shape", -1.0)))
+                      for s, r, sh, i in pairs])
+        assert len(d) == row.pairs and d.mean() == pytest.approx(row.shift, abs=1e-12)
+        half = 1.96 * d.std(ddof=1) / math.sqrt(len(d))
+        assert (row.shift_ci_high - row.shift_ci_low) / 2 == pytest.approx(half, rel=0.15)
 
 
 def test_what_differs_and_which_plans_moved(two_runs):

@@ -272,6 +272,16 @@ def test_the_base_follows_the_protocols_path_in_mujoco():
     assert offsets == pytest.approx(np.hypot(a, b), abs=1e-12)
     assert offsets.max() == pytest.approx(MUJOCO.shake_amplitude, rel=1e-3)
     assert math.isclose(shake[0, 2], slot.base_z + MUJOCO.lift_height)
+    # Against the closed forms: the shake's offset follows the amplitude's sin^2 envelope
+    # at the end of each step, its turn is in proportion to the offset along the first
+    # axis, and the lift rises on the minimum-jerk profile.
+    t = (np.arange(len(shake)) + 1) * MUJOCO.time_step
+    envelope = MUJOCO.shake_amplitude * np.sin(np.pi * t / MUJOCO.shake_time) ** 2
+    assert offsets == pytest.approx(envelope, abs=1e-12)
+    assert angle == pytest.approx(MUJOCO.shake_turn * a / MUJOCO.shake_amplitude, abs=1e-12)
+    tau = (np.arange(len(positions)) + 1) * MUJOCO.time_step / MUJOCO.lift_time
+    rise = MUJOCO.lift_height * (10 * tau**3 - 15 * tau**4 + 6 * tau**5)
+    assert positions[:, 2] - slot.base_z == pytest.approx(rise, abs=1e-12)
 
 
 def test_the_study_rebuilds_a_disagreement_with_frames_and_traces(quick_runs, tmp_path):

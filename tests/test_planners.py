@@ -240,6 +240,13 @@ def test_planners_report_a_trace_and_their_work(beliefs):
         times = [t[0] for t in plan.trace]
         assert times == sorted(times) and len(times) > 0
         assert plan.evaluations > 0 and plan.iterations > 0 and sum(plan.seconds.values()) > 0
+        # (seconds, evaluations, best so far): the work and the best only grow, and the
+        # trace ends at the plan's own work. The Monte-Carlo planners' best is their
+        # estimate (mean-shape traces its quality, gp-gpis-opt its surrogate's objective).
+        work, best = [t[1] for t in plan.trace], [t[2] for t in plan.trace]
+        assert work == sorted(work) and best == sorted(best) and work[-1] == plan.evaluations, planner.name
+        if planner.name in ("gp-p", "gp-bandit"):
+            assert best[-1] == pytest.approx(plan.estimate, abs=1e-12), planner.name
 
 
 # -- the registry ----------------------------------------------------------------------------

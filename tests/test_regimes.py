@@ -126,18 +126,30 @@ def test_regime_rows_match_the_trials(sweep):
 
 
 def test_pooled_difference_is_the_trial_weighted_mean(sweep):
-    """The difference pooled over the sweep is the mean over every paired trial, which is
-    the per-regime differences weighted by their pairs (a second formulation)."""
+    """The difference pooled over the sweep is the mean over every paired posterior trial
+    of every regime, computed here from the ledgers (each regime's pairs counted from its
+    trials, not assumed), and so the per-regime differences weighted by those pairs."""
     out, result = sweep
-    rows = pd.DataFrame(result["rows"])
-    allrows = rows[rows.part == "all"]
+    rows = pd.DataFrame(result["rows"]).set_index(["regime", "part"])
+    names = {o.name for o in OBJECTS}
     for p in rs.LIFT_PLANNERS:
-        pairs = np.array([len(OBJECTS) * 6] * len(allrows))  # every plan executed: objects x posterior trials
-        weighted = float((allrows[f"diff:{p}"].to_numpy() * pairs).sum() / pairs.sum())
+        paired, weights = [], []
+        for regime in REGIMES:
+            post = load(out / "pybullet" / regime.name)["trials"].query("shapes == 'posterior'")
+            wide = post.assign(s=(post.outcome == "success").astype(float)).pivot_table(
+                index=["scene", "trial"], columns="planner", values="s")
+            diff = (wide[p] - wide["mean-shape-lift"]).dropna()
+            assert set(diff.index.get_level_values("scene")) == names
+            paired.append(diff.to_numpy())
+            weights.append((rows.loc[(regime.name, "all"), f"diff:{p}"], len(diff)))
+        every = np.concatenate(paired)
         pooled = result["pooled"]["pybullet"]["all"][p]
-        assert pooled["pairs"] == pairs.sum()
+        assert pooled["pairs"] == len(every) == sum(n for _, n in weights)
+        assert pooled["difference"] == pytest.approx(float(every.mean()), abs=1e-12)
+        weighted = sum(d * n for d, n in weights) / sum(n for _, n in weights)
         assert pooled["difference"] == pytest.approx(weighted, abs=1e-12)
         assert pooled["ci_low"] <= pooled["difference"] <= pooled["ci_high"]
+    assert any(result["pooled"]["pybullet"]["all"][p]["difference"] != 0 for p in rs.LIFT_PLANNERS)
 
 
 def test_outputs_and_the_command_line(sweep, tmp_path):

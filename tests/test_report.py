@@ -5,6 +5,8 @@ comparisons a config with lift variants gets."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from scipy import stats
@@ -71,6 +73,10 @@ def test_the_summary_pools_p_l_over_the_plans_draws(run):
         row = s[(s.scene == "all") & (s.planner == planner)].iloc[0]
         mine = a[a.planner == planner]
         assert row.p_l == pytest.approx((mine.p_l * DRAWS).sum() / (DRAWS * len(mine)), abs=1e-12)
+        # The interval is Wilson's over the pooled draws (scipy's implementation).
+        wilson = stats.binomtest(round((mine.p_l * DRAWS).sum()), DRAWS * len(mine)).proportion_ci(method="wilson")
+        assert (row.p_l_ci_low, row.p_l_ci_high) == (pytest.approx(wilson.low, abs=1e-9),
+                                                     pytest.approx(wilson.high, abs=1e-9))
         assert row.p_l_ci_low < row.p_l < row.p_l_ci_high
 
 
@@ -287,3 +293,35 @@ def test_the_plan_table_gives_each_executed_plan_and_its_share_of_the_ranking_er
     assert table.p_l_rank_share.to_numpy() == pytest.approx(shares) and shares.sum() == pytest.approx(1.0)
     pooled = calibration(changed)[0]
     assert rho == pytest.approx(pooled[(pooled.metric == "p_l") & (pooled.planner == "all")].spearman.iloc[0])
+
+
+@pytest.mark.parametrize(("change", "field"), [
+    ("config = '{}'", "runs.config.seed"),
+    ("config = '[1, 2]'", "runs.config"),
+    ("config = json_remove(config, '$.scenes')", "runs.config.scenes"),
+    ("config = json_set(config, '$.posterior_trials', 'a')", "runs.config.posterior_trials"),
+    ("config = json_set(config, '$.planners', json('[{\"name\": \"gp-p\"}]'))", "runs.config.planners"),
+    ("config = json_set(config, '$.physics', json('[1]'))", "runs.config.physics"),
+    ("environment = '[]'", "runs.environment"),
+])
+def test_a_stored_run_of_the_wrong_structure_is_one_line(tmp_path, capsys, change, field):
+    """The ledger checks its columns' types; the JSON of a run's config and environment is
+    checked on reading: a folder whose stored run has another structure (edited, or written
+    by something else) is one line naming the field for report and compare, exit 2."""
+    import shutil
+    import sqlite3
+
+    from harness.cli import main
+
+    reference = Path(__file__).resolve().parent.parent / "results" / "reference"
+    good, bad = tmp_path / "good", tmp_path / "bad"
+    for folder in (good, bad):
+        shutil.copytree(reference, folder, ignore=shutil.ignore_patterns("figures", "*.lock"))
+    with sqlite3.connect(bad / "ledger.sqlite") as db:
+        db.execute(f"UPDATE runs SET {change}")
+    for argv in (["report", str(bad), "--no-figures"], ["compare", str(good), str(bad)]):
+        assert main(argv) == 2, argv
+        lines = capsys.readouterr().err.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith(f"gpis-harness: error: {bad / 'ledger.sqlite'}: {field}: "), \
+            lines
+    assert main(["report", str(good), "--no-figures"]) == 0  # the untouched copy reads as ever

@@ -443,5 +443,21 @@ def test_a_slide_that_runs_another_wall_into_a_plates_side_is_held_where_it_stop
     plain, plain_shape = fields(wedge)
     plain_contacts = find_contacts(plain, g1, g2, JAW)
     plain_closed, _ = plate_closure(plain_contacts, mu, np.array(plain_shape.centroid.coords[0]), 0.05)
-    on = squeeze(plain, g1, g2, 0, plain_contacts, plain_closed, mu, JAW, 0.05, slide_limit=0.02)
-    assert not (on.squeezed[0] and on.shift[0] <= held + 1e-9)
+    # Without the tooth, the same searches go on past the shift the tooth stopped: none
+    # starts inside the wedge, and each shifted grasp is still out of closure...
+    plain_com = np.array(plain_shape.centroid.coords[0])
+    last = plain_contacts
+    for shift in np.arange(1, round(held / SLIDE_STEP) + 4) * SLIDE_STEP:
+        h1, h2 = at(shift)
+        probe = find_contacts(plain, np.array([[shift, last.c1[0, 1] - SQUEEZE_MARGIN]]), h2, JAW)
+        assert probe.status[0] == OK
+        last = find_contacts(plain, h1, h2, JAW)
+        assert last.status[0] == OK and not plate_closure(last, mu, plain_com, 0.05)[0][0]
+    # ... so the slide runs on to its limit (20 mm) out of closure, and with a longer limit
+    # until the plates slide off the wedge's narrow end (at 26 mm: a lost contact). Neither
+    # is settled, and no shift is recorded.
+    for limit in (0.02, 0.03):
+        on = squeeze(plain, g1, g2, 0, plain_contacts, plain_closed, mu, JAW, 0.05, slide_limit=limit)
+        assert not on.squeezed[0] and on.shift[0] == 0.0
+    assert find_contacts(plain, *at(0.024), JAW).status[0] == OK
+    assert find_contacts(plain, *at(0.026), JAW).status[0] != OK
