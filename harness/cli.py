@@ -479,7 +479,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog=PROG, description="Grasp planning under shape uncertainty, validated by physics.")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
-    scenes = sub.add_parser("scenes", help="the scene library: list, check, show, render")
+    scenes = sub.add_parser("scenes", help="the scene library: list, check, show, render, generate")
     ssub = scenes.add_subparsers(dest="scenes_command", required=True, parser_class=_Parser)
     p = ssub.add_parser("list", help="name and description of every library scene")
     p.set_defaults(func=_scenes_list)

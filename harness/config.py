@@ -17,7 +17,7 @@ from pathlib import Path
 
 from harness.errors import InputError
 from harness.protocol import ENGINES, PAD_STIFFNESS
-from harness.scene import LIBRARY, library_names, load_scene, resolve
+from harness.scene import LIBRARY, library_names, load_scene, outline_files, resolve
 from harness.toml_table import Table, read_toml
 
 #: Protocol fields a config may override, with their ranges (low, high, low end open). The
@@ -77,6 +77,13 @@ class ExperimentConfig:
             d.pop(key)
         d["scenes"] = {name: hashlib.sha256(Path(p).read_bytes()).hexdigest()
                        for name, p in zip(self.scene_names, self.scenes, strict=True)}
+        # The outline files a scene reads are part of it: an edited outline is another
+        # experiment, not a resume. Keyed as the scene file writes them (no machine's
+        # absolute paths); only for scenes that read one, so other hashes stay as they were.
+        outlines = {name: {written: hashlib.sha256(Path(f).read_bytes()).hexdigest() for written, f in found}
+                    for name, p in zip(self.scene_names, self.scenes, strict=True) if (found := outline_files(p))}
+        if outlines:
+            d["outline_files"] = outlines
         # Recorded whether or not the config sets it: a ledger whose samples' bodies were
         # outlined on the belief's own cells (before body_refinement) is not resumed into
         # rows made with finer ones.

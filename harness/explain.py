@@ -41,6 +41,7 @@ def trial_draws(out_dir: Path, data: dict | None = None) -> pd.DataFrame:
     Raises InputError when a verdict recomputed here is not the one the ledger recorded."""
     from harness import pipeline
     from harness.config import ExperimentConfig
+    from harness.gpis import single_threaded_blas
     from harness.quality import LIFT_INPUTS, SETTLE_INPUTS, SETTLED, evaluate_draws
     from harness.report import load
     from harness.tasks import scene_of, settings_of
@@ -65,7 +66,8 @@ def trial_draws(out_dir: Path, data: dict | None = None) -> pd.DataFrame:
                                   pipeline.cell_draws(config.analytic_draws, n))
         draws = cell.draws.first(n)
         for plan in cell_plans.to_dict("records"):
-            out = evaluate_draws(pipeline.planned_grasp(plan), draws, settings, lift_inputs=True)
+            with single_threaded_blas():  # as eval judged it (harness.pipeline.judge)
+                out = evaluate_draws(pipeline.planned_grasp(plan), draws, settings, lift_inputs=True)
             verdicts = [pipeline.verdict_label(r, t) for r, t in zip(out.reason[0], out.pivots[0])]
             key = (name, realisation, plan["planner"])
             ledger = recorded.get(key)

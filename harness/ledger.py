@@ -233,15 +233,19 @@ class Ledger:
                 self.db.executemany(sql, [(config_hash, *(row[c] for c in columns)) for row in rows])
 
     def table(self, config_hash: str, table: str) -> pd.DataFrame:
+        """A table's rows under a config hash, in the order of its key (the report's
+        bootstrap and retest pick trials by position: their order must not be the order in
+        which the workers finished)."""
         columns = ", ".join(_COLUMNS[table])
-        return pd.read_sql_query(f"SELECT {columns} FROM {table} WHERE config_hash = ?", self.db,
-                                 params=(config_hash,))
+        return pd.read_sql_query(f"SELECT {columns} FROM {table} WHERE config_hash = ? "
+                                 f"ORDER BY {', '.join(_ROW_KEYS[table])}", self.db, params=(config_hash,))
 
     def rows(self, config_hash: str, table: str) -> list[dict]:
         """A table's rows under a config hash as stored (Python values, NULL as None),
         ready for :meth:`add`."""
         columns = _COLUMNS[table]
-        cur = self.db.execute(f"SELECT {', '.join(columns)} FROM {table} WHERE config_hash = ?", (config_hash,))
+        cur = self.db.execute(f"SELECT {', '.join(columns)} FROM {table} WHERE config_hash = ? "
+                              f"ORDER BY {', '.join(_ROW_KEYS[table])}", (config_hash,))
         return [dict(zip(columns, row)) for row in cur]
 
     def done_trials(self, config_hash: str, scene: str, realisation: int) -> set[tuple[str, str, int]]:

@@ -64,11 +64,16 @@ def open_cell(scene: Scene, settings: GraspSettings, seed: int, realisation: int
     mean shape and centre of mass computed now) and draw ``draws`` paired evaluation
     draws."""
     from harness.belief import build_belief
+    from harness.gpis import single_threaded_blas
     from harness.quality import default_streams, draw_evaluation
     from harness.seeding import stream
 
-    belief = build_belief(scene, stream(seed, scene.name, realisation, "sensor")).prepare()
-    evaluation = draw_evaluation(belief, draws, *default_streams(seed, scene.name, realisation))
+    # One BLAS thread, as in eval's cell tasks (harness.tasks.run_cell): the GP's fit (its
+    # Cholesky factor) differs in its last bits with the thread count, so a command that
+    # opens a cell must use the same one to print what eval records.
+    with single_threaded_blas():
+        belief = build_belief(scene, stream(seed, scene.name, realisation, "sensor")).prepare()
+        evaluation = draw_evaluation(belief, draws, *default_streams(seed, scene.name, realisation))
     return Cell(seed, realisation, scene, settings, belief, evaluation)
 
 
@@ -91,10 +96,13 @@ def plan(cell: Cell, label: str, name: str, params: dict, budget: float | None,
            "iterations": 0, "evaluations": 0, "trace": "[]"}
     problem = Problem(cell.belief, cell.settings, time_budget_s=budget)
     rng = stream(cell.seed, cell.scene.name, cell.realisation, "planner", label)
+    from harness.gpis import single_threaded_blas
+
     builtins()  # imported here once, not in every plan's process; plugins load there only
     load_kernels()  # the compiled contact search, loaded once here: no plan's budget pays for it
-    outcome = isolation.call(_plan_in_child, name, params, problem, rng,
-                             deadline_s=None if budget is None else deadline_s(budget), memory_bytes=memory_bytes)
+    with single_threaded_blas():  # the plan's process inherits it, as in eval's cell tasks
+        outcome = isolation.call(_plan_in_child, name, params, problem, rng,
+                                 deadline_s=None if budget is None else deadline_s(budget), memory_bytes=memory_bytes)
     if outcome.kind != "returned":
         row.update(status=outcome.kind, message=outcome.message[:500], plan_time_s=outcome.seconds)
         return row, outcome.traceback
@@ -163,8 +171,12 @@ def _grasp_problem(coords: np.ndarray, cell: Cell) -> str | None:
 
 def judge(cell: Cell, grasp, draws: int):
     """The analytic verdicts (harness.quality.DrawOutcomes) of one grasp ((2, 2) jaw
-    starts or a Grasp) on the cell's first ``draws`` evaluation draws."""
-    return evaluate_draws(grasp, cell.draws.first(draws), cell.settings)
+    starts or a Grasp) on the cell's first ``draws`` evaluation draws (with one BLAS
+    thread, as :func:`open_cell`)."""
+    from harness.gpis import single_threaded_blas
+
+    with single_threaded_blas():
+        return evaluate_draws(grasp, cell.draws.first(draws), cell.settings)
 
 
 def planned_grasp(row: dict) -> np.ndarray:

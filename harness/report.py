@@ -650,18 +650,25 @@ def write_report(out_dir: Path, figures: bool = True) -> dict:
 
 
 def budget_note(data: dict) -> str | None:
-    """A line for the report when plans stopped at their time budget (status 'budget'):
-    such a plan's grasp depends on how fast the machine ran it, so its rows may differ
-    with other workers or on another machine (docs/experiments.md, "Reproducible across
-    machines"); None when no plan did."""
+    """A line for the report when plans stopped at their time budget (status 'budget'), or
+    were killed past their deadline ('overtime') or by their memory limit or a signal
+    ('crashed'): such a plan's grasp, or its having none, depends on how fast the machine
+    ran it and on how much memory each worker had, so its rows may differ with other
+    workers or on another machine (docs/experiments.md, "Reproducible across machines");
+    None when no plan did."""
     plans = data["plans"]
-    stopped = plans[plans.status == "budget"]
-    if stopped.empty:
+    parts = []
+    for statuses, what in ((("budget",), "stopped at their time budget"),
+                           (("overtime", "crashed"), "were killed past their deadline or by their memory limit")):
+        stopped = plans[plans.status.isin(statuses)]
+        if len(stopped):
+            counts = ", ".join(f"{p} {n}" for p, n in stopped.planner.value_counts().sort_index().items())
+            parts.append(f"{len(stopped)} of {len(plans)} plans {what} ({counts})")
+    if not parts:
         return None
-    counts = ", ".join(f"{p} {n}" for p, n in stopped.planner.value_counts().sort_index().items())
-    return (f"{len(stopped)} of {len(plans)} plans stopped at their time budget ({counts}): their grasps "
-            "depend on this machine's speed and load, so their rows may differ with other workers or on "
-            "another machine; a larger time_budget_s removes that for planners that finish on their own.")
+    return ("; ".join(parts) + ": their grasps depend on this machine's speed, memory and load, so their rows may "
+            "differ with other workers or on another machine; a larger time_budget_s removes that for planners "
+            "that finish on their own.")
 
 
 def _leaderboard_latex(board: pd.DataFrame) -> str:

@@ -272,6 +272,27 @@ def _valid_polygon(t: Table, geom: Polygon, field: str) -> Polygon:
     return geom
 
 
+def outline_files(path: str | Path) -> list[tuple[str, Path]]:
+    """The outline files a scene file reads (``type = "outline"`` tables anywhere in it:
+    the shape, a union's parts, a region's shape), each as written in the file and
+    resolved against the file's folder, in file order. Their content is part of the scene
+    (harness.config hashes it beside the scene's own text)."""
+    found: list[tuple[str, Path]] = []
+
+    def walk(value) -> None:
+        if isinstance(value, dict):
+            if value.get("type") == "outline" and isinstance(value.get("path"), str):
+                found.append((value["path"], (Path(path).parent / value["path"]).resolve()))
+            for v in value.values():
+                walk(v)
+        elif isinstance(value, list):
+            for v in value:
+                walk(v)
+
+    walk(read_toml(Path(path)))
+    return found
+
+
 def _outline(t: Table, cell: float, base_dir: Path) -> Polygon:
     rel = t.string("path")
     scale = t.number("scale", lo=0.0, lo_open=True, hi=100.0)

@@ -161,7 +161,11 @@ class GPGPISOpt(Planner):
             grasp, message = starts[0], "no optimised grasp was executable; returning a start"
             status = "ok" if feasible[0] else "infeasible"
         if any(s == "time_limit" for s in result.status):
-            status = "budget"
+            # Cut short by the budget: the best grasp so far is executed only if it is
+            # feasible ("budget", as "ok"); an infeasible one stays "infeasible".
+            if status == "ok":
+                status = "budget"
+            message = "; ".join(m for m in (message, "stopped at the time budget") if m)
         trace = _trace(result, settings.constraint_tol)
         return Plan(Grasp(tuple(grasp[0]), tuple(grasp[1])), status, estimate,
                     iterations=int(result.iterations.max()), evaluations=result.evaluations, seconds=clock.phases,

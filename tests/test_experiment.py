@@ -158,6 +158,28 @@ def test_pairing_same_shapes_and_noise_for_every_planner(tmp_path):
         assert row.difference == pytest.approx((row.only_planner - row.only_versus) / row.pairs, abs=1e-12)
 
 
+def test_the_config_hash_covers_the_outline_files_a_scene_reads(tmp_path):
+    """An outline CSV is part of its scene: editing it changes the experiment's hash (a
+    resume would otherwise mix rows of two shapes), rewriting it the same does not, and a
+    config whose scenes read no file hashes as before (no 'outline_files' entry)."""
+    (tmp_path / "shapes").mkdir()
+    csv = tmp_path / "shapes" / "box.csv"
+    csv.write_text("x,y\n0,0\n6,0\n6,3\n0,3\n")
+    (tmp_path / "box.toml").write_text('[grid]\nsize = 40\nextent = 0.2\n[shape]\ntype = "outline"\n'
+                                        'path = "shapes/box.csv"\nscale = 0.01\n')
+    config = _write(tmp_path, 'scenes = ["box.toml", "disk"]\n[[planners]]\nname = "mean-shape"\n', "c.toml")
+    first = load_config(config)
+    assert set(first.content()["outline_files"]) == {"box"}
+    assert first.content()["outline_files"]["box"].keys() == {"shapes/box.csv"}
+    before = first.hash  # the hash reads the files when asked: keep this one's
+    csv.write_text("x,y\n0,0\n6,0\n6,3\n0,3\n")
+    assert load_config(config).hash == before
+    csv.write_text("x,y\n0,0\n6,0\n6,3.5\n0,3\n")
+    assert load_config(config).hash != before
+    plain = load_config(_write(tmp_path, 'scenes = ["disk"]\n[[planners]]\nname = "mean-shape"\n', "d.toml"))
+    assert "outline_files" not in plain.content()
+
+
 def test_results_do_not_depend_on_workers_or_executor(tiny_run, tmp_path):
     config, out2 = tiny_run
     reference = _tables(out2)
@@ -413,9 +435,11 @@ def test_corrupt_or_foreign_ledger_is_one_line_exit_2(tmp_path, capsys):
 
 
 def test_a_cell_plans_with_one_blas_thread_and_the_same_results(tmp_path, monkeypatch):
-    """The workers are the parallelism: inside a cell BLAS runs one thread, and the plan
-    and the trials' shapes are bit for bit those of a cell run with the process's own
-    BLAS threads (whatever this machine has)."""
+    """The workers are the parallelism: inside a cell BLAS runs one thread, whether the cell
+    is eval's task (run_cell) or opened directly, as the single-shot commands (plan,
+    quality, simulate, report --draws) open it, so that they print what eval records (the
+    GP's fit differs in its last bits with the thread count); the process's own threads
+    are back afterwards, and the plan and the trials' shapes are the same bit for bit."""
     from threadpoolctl import threadpool_info
 
     import harness.belief
@@ -436,7 +460,7 @@ def test_a_cell_plans_with_one_blas_thread_and_the_same_results(tmp_path, monkey
     config = load_config(_write(tmp_path, TINY))
     path, labels = config.scenes[0], ("mean-shape",)
     limited, free = run_cell(config, path, 0, labels), _cell(config, path, 0, labels, None)
-    assert seen == [{1}, outside]
+    assert seen == [{1}, {1}]
     assert blas_threads() == outside
     keys = ("g1x", "g1y", "g2x", "g2y", "estimate")
     assert [limited.plans[0][k] for k in keys] == [free.plans[0][k] for k in keys]

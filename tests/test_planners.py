@@ -233,6 +233,28 @@ def test_gp_p_bounded_search_picks_what_judging_every_candidate_on_every_draw_pi
         assert bounded.grasp == every.grasp and bounded.estimate == every.estimate, name
 
 
+@pytest.mark.parametrize(("violation", "status"), [(0.0, "budget"), (1.0, "infeasible")])
+def test_gp_gpis_opt_cut_short_by_its_budget_executes_only_a_feasible_grasp(beliefs, monkeypatch, violation,
+                                                                             status):
+    """An SCP stopped at the time budget returns its best grasp so far: "budget" (executed,
+    as "ok") when that grasp is feasible on the mean shape, "infeasible" (not executed)
+    when it is not; the budget never makes an infeasible grasp executable. The SCP is
+    replaced by one that stops at once with every start's violation set."""
+    import planners.gp_gpis_opt as opt
+    from harness.scp import SCPResult
+
+    def stopped(fun, x0, lower, upper, n_eq, n_ineq, settings, time_budget=None):
+        p = len(x0)
+        return SCPResult(np.array(x0, dtype=float), fun(np.asarray(x0))[0], np.full(p, violation),
+                         np.ones(p, dtype=int), ["time_limit"] * p, p)
+
+    monkeypatch.setattr(opt, "minimize", stopped)
+    problem = Problem.for_belief(beliefs("rectangle"))
+    plan = GPGPISOpt(initialisations=3, screen=20, finalists=0).plan(problem, stream(0, "budget-test"))
+    assert plan.status == status and plan.grasp is not None
+    assert "stopped at the time budget" in plan.message
+
+
 def test_planners_report_a_trace_and_their_work(beliefs):
     problem = Problem.for_belief(beliefs("disk"))
     for planner in (MeanShape(), GPP(samples=200, candidates=20), GPGPISOpt(), GPBandit()):
