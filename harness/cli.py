@@ -90,11 +90,10 @@ def _render(scene_arg: str, seed: int, out: Path) -> Path:
     import matplotlib.pyplot as plt
 
     from harness.belief import build_belief
+    from harness.outputs import output_folder, storage
     from harness.plots import scene_figure
     from harness.scene import load_scene
     from harness.seeding import stream
-
-    from harness.outputs import output_folder, storage
 
     scene = load_scene(scene_arg)
     output_folder(out.parent, "--out", "the pictures' folder")  # before any work: one line if it cannot be made
@@ -187,12 +186,11 @@ def _simulate(args) -> int:
 
     from harness import pipeline
     from harness.memory import check_single
+    from harness.outputs import output_folder, storage
     from harness.physics.simulate import SimulationSummary, make_trials
     from harness.physics.engines import make_runner
     from harness.physics.trace import Tracer
     from harness.protocol import Protocol
-
-    from harness.outputs import output_folder, storage
 
     scene, grasp, settings = _scene_and_grasp(args)
     if args.frames is not None:  # made now, before any trial: one line if it cannot be

@@ -108,7 +108,7 @@ def _content_hash(run: dict) -> str | None:
     config["physics"] = {k: v for k, v in (config.get("physics") or {}).items() if k != "engine"}
     try:
         return ExperimentConfig.from_dict(config).hash
-    except OSError:
+    except (OSError, InputError):  # a scene file, or an outline it reads, gone or no longer readable
         return None
 
 

@@ -85,6 +85,7 @@ def plan(cell: Cell, label: str, name: str, params: dict, budget: float | None,
     crash and its memory (``memory_bytes`` beyond the caller's) stay there, and it is
     killed at its deadline (harness.deadline) when it has a ``budget``. Never raises for
     the planner's faults; they are the row's status."""
+    from harness.gpis import single_threaded_blas
     from harness.grasp import load_kernels
     from harness.seeding import stream
     from planners.base import Problem
@@ -96,8 +97,6 @@ def plan(cell: Cell, label: str, name: str, params: dict, budget: float | None,
            "iterations": 0, "evaluations": 0, "trace": "[]"}
     problem = Problem(cell.belief, cell.settings, time_budget_s=budget)
     rng = stream(cell.seed, cell.scene.name, cell.realisation, "planner", label)
-    from harness.gpis import single_threaded_blas
-
     builtins()  # imported here once, not in every plan's process; plugins load there only
     load_kernels()  # the compiled contact search, loaded once here: no plan's budget pays for it
     with single_threaded_blas():  # the plan's process inherits it, as in eval's cell tasks
