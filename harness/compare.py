@@ -22,7 +22,8 @@ import numpy as np
 import pandas as pd
 
 from harness.errors import InputError
-from harness.report import ALL, comparison_pairs, expected, load, mcnemar, paired_difference, row_groups
+from harness.report import (ALL, comparison_pairs, expected, linked_difference, load, mcnemar, paired_difference,
+                            row_groups)
 
 #: Config fields that decide the draws: runs that differ in one are not paired.
 PAIRING_FIELDS = ("seed", "realisations", "analytic_draws", "posterior_trials", "truth_trials", "settings")
@@ -147,8 +148,10 @@ def _cells(trials: pd.DataFrame, scenes: list[str], planners: list[str], rng: np
         t = trials[mask]
         if t.empty:
             continue
-        groups = row_groups(t, ["scene", "realisation", "planner", "shapes"])
-        diff = paired_difference((t.b - t.a).to_numpy(), groups, rng)
+        # The planners of one cell share trial i's draws: pooled over planners, a cell's
+        # trials are resampled together (linked_difference); per planner, within its plan.
+        frame = t.assign(d=(t.b - t.a).astype(float))
+        diff = linked_difference(frame, ["scene", "realisation", "shapes"], "planner", rng)
         only_a, only_b, p = mcnemar(t.a.to_numpy(), t.b.to_numpy())
         rows.append({"scene": scene, "planner": planner, "shapes": shapes, "pairs": diff.pop("pairs"),
                      "success_a": float(t.a.mean()), "success_b": float(t.b.mean()), **diff,

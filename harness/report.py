@@ -186,6 +186,30 @@ def paired_difference(d: np.ndarray, groups: list[np.ndarray], rng: np.random.Ge
             "ci_high": float(np.percentile(boot, 97.5))}
 
 
+def linked_difference(frame: pd.DataFrame, cell: list[str], member: str, rng: np.random.Generator) -> dict:
+    """Mean of the paired differences ``frame.d`` with a bootstrap 95 % interval, where the
+    rows of one ``cell`` (its keys) and one ``trial`` index share their random draws across
+    ``member``s: the planners of one cell meet the same shape sample and noise in trial i,
+    and so do a sweep's regimes on one object. Each cell's trials are resampled with one
+    draw of trial indices, applied to every member (as :func:`paired_difference` resamples
+    a plan's trials, which it equals bit for bit when each cell has one member); resampling
+    the members apart would treat shared draws as independent and narrow the interval."""
+    wide = frame.pivot_table(index=[*cell, "trial"], columns=member, values="d", aggfunc="first")
+    values = wide.to_numpy(dtype=float)
+    present = ~np.isnan(values)
+    values = np.where(present, values, 0.0)
+    sums, counts = np.zeros(BOOTSTRAP), np.zeros(BOOTSTRAP)
+    cells = pd.Series(np.arange(len(wide)), index=wide.index.droplevel("trial"))
+    for _, rows in cells.groupby(level=list(range(len(cell))), sort=True):
+        rows = rows.to_numpy()
+        picks = rows[rng.integers(0, len(rows), size=(BOOTSTRAP, len(rows)))]
+        sums += values[picks].sum(axis=(1, 2))
+        counts += present[picks].sum(axis=(1, 2))
+    boot = sums / counts
+    return {"pairs": int(present.sum()), "difference": float(frame.d.mean()),
+            "ci_low": float(np.percentile(boot, 2.5)), "ci_high": float(np.percentile(boot, 97.5))}
+
+
 def mcnemar(a: np.ndarray, b: np.ndarray) -> tuple[int, int, float]:
     """Discordant pairs of two 0/1 outcome arrays (a only, b only) and McNemar's exact p."""
     only_a, only_b = int(((a == 1) & (b == 0)).sum()), int(((a == 0) & (b == 1)).sum())

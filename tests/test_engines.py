@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import mujoco
@@ -338,3 +339,49 @@ def test_the_engines_study_reports_the_runs_own_counts(quick_runs, tmp_path):
             "largest_turning_error": None, "missing": 0}
     text = "\n".join(format_lines({**res, "lift": {"pybullet": bars, "mujoco": bars}}))
     assert text.count("bar 18 x 3 x 3 cm") == 2 and "the lift model's bars in mujoco:" in text
+
+
+def test_mujocos_runaway_check_reads_the_centre_of_mass_speed_as_bullets_does():
+    """A free joint's linear velocity is its frame origin's (the polygon's origin), not the
+    centre of mass's, which Bullet's base velocity gives. On a rectangle shifted 4 cm from
+    the origin, a spin of 20 rad/s about the vertical through its centre of mass moves the
+    origin at 0.8 m/s and the centre of mass not at all: the check reads 0; a translation
+    of 0.3 m/s reads 0.3 (below and above a max_speed of 0.1 m/s)."""
+    import shapely.affinity
+
+    scene = load_scene("rectangle")
+    settings = resolve(scene, {"sigma_g": 0.0})
+    polygon = shapely.affinity.translate(truth_polygon(scene), xoff=0.04)
+    trial = make_trials(settings, [(-0.005, 0.0), (0.085, 0.0)], [polygon], np.zeros((1, 2, 2)))[0]
+    slot = me._Slot(me.MujocoRunner(replace(MUJOCO, max_speed=0.1)), trial)
+    mujoco.mj_kinematics(slot.model, slot.data)
+    com, origin = slot.data.xipos[slot.obj].copy(), slot.data.xpos[slot.obj].copy()
+    assert np.linalg.norm((com - origin)[:2]) == pytest.approx(0.04, abs=1e-6)
+    spin = np.array([0.0, 0.0, 20.0])  # world frame; the body's frame is the world's here (no turn yet)
+    np.testing.assert_allclose(slot.data.xmat[slot.obj].reshape(3, 3), np.eye(3), atol=1e-12)
+    slot.obj_velocity[:] = [*(-np.cross(spin, com - origin)), *spin]
+    slot.fresh = False
+    assert np.linalg.norm(slot.obj_velocity[:3]) == pytest.approx(0.8, rel=1e-6) and not slot.blew_up()
+    slot.obj_velocity[:] = [0.3, 0.0, 0.0, 0.0, 0.0, 0.0]
+    assert slot.blew_up()
+
+
+def test_without_early_stop_a_trial_keeps_its_first_failure_when_it_later_blows_up():
+    """The naive reference runs every trial to the end (early_stop off) and records the
+    first failure seen: an object lost in the lift that then diverges is 'slipped', not
+    'unstable' (which replaced it before)."""
+    trial = _rectangle_trials((-0.045, 0.0), (0.045, 0.0))[0]
+    slot = me._Slot(me.MujocoRunner(MUJOCO, early_stop=False), trial)
+    while slot.phase == "close" and slot.result is None:
+        slot.before_step()
+        mujoco.mj_step(slot.model, slot.data)
+        slot.fresh = False
+        slot.after_step()
+    slot._fail("slipped")
+    assert slot.result is None  # no early stop: it runs on
+    slot.obj_velocity[0] = math.nan  # the state diverges
+    while slot.result is None:
+        slot.before_step()
+        slot.fresh = False
+        slot.after_step()
+    assert slot.result.outcome == "slipped"

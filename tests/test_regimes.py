@@ -364,3 +364,37 @@ def test_a_part_of_the_sweep_runs_the_named_regimes_in_the_sweeps_order(monkeypa
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and "--regimes" in err[0] and "centre, weak, strong" in err[0]
     assert not Path("never-made").exists()
+
+
+def test_regimes_that_share_draws_are_resampled_together():
+    """Every regime runs at the sweep's seed on objects of the same names, so trial i of an
+    object shares its random draws across regimes. The pooled interval resamples those
+    trials together: two regimes with the same outcomes trial for trial (draws that decide
+    everything) pool to the very interval of one, where resampling them apart would narrow
+    it by about sqrt(2); a single regime's interval is the report's within-plan bootstrap,
+    bit for bit."""
+    from harness.report import _paired, paired_difference, row_groups
+
+    rng = np.random.default_rng(7)
+    rows = []
+    for scene in ("a", "b", "c"):
+        for realisation in range(2):
+            for planner, rate in (("gp-gpis-opt-lift", 0.8), (rs.BASELINE_LIFT, 0.6)):
+                for trial in range(24):
+                    rows.append({"scene": scene, "realisation": realisation, "planner": planner,
+                                 "shapes": "posterior", "trial": trial,
+                                 "outcome": "success" if rng.random() < rate else "slipped"})
+    one = pd.DataFrame(rows).assign(regime="weak")
+    single = rs._difference(one, "gp-gpis-opt-lift", rs.BASELINE_LIFT)
+    m = _paired(one.assign(scene="weak/" + one.scene), "gp-gpis-opt-lift", rs.BASELINE_LIFT, "posterior")
+    report = paired_difference((m.a - m.b).to_numpy(), row_groups(m, ["scene", "realisation"]),
+                               np.random.default_rng(np.random.SeedSequence([0, 0x5EE9])))
+    assert (single["ci_low"], single["ci_high"]) == (report["ci_low"], report["ci_high"])
+    twice = rs._difference(pd.concat([one, one.assign(regime="strong")], ignore_index=True),
+                           "gp-gpis-opt-lift", rs.BASELINE_LIFT)
+    assert twice["pairs"] == 2 * single["pairs"] and twice["difference"] == pytest.approx(single["difference"])
+    assert (twice["ci_low"], twice["ci_high"]) == (pytest.approx(single["ci_low"]), pytest.approx(single["ci_high"]))
+    apart = rs._difference(pd.concat([one, one.assign(regime="strong", scene="x" + one.scene)], ignore_index=True),
+                           "gp-gpis-opt-lift", rs.BASELINE_LIFT)  # other names: other draws, resampled apart
+    ratio = (apart["ci_high"] - apart["ci_low"]) / (single["ci_high"] - single["ci_low"])
+    assert ratio == pytest.approx(1 / math.sqrt(2), rel=0.15)

@@ -380,17 +380,26 @@ def engine_yardstick(post: pd.DataFrame, other: pd.DataFrame, plans: pd.DataFram
 
 def _difference(trials: pd.DataFrame, a: str, b: str, seed: int = 0) -> dict:
     """Paired success difference a - b on posterior samples with the report's bootstrap
-    interval (pairs resampled within each plan's trials); ``trials`` may hold several
-    regimes (a 'regime' column keeps their plans apart)."""
-    from harness.report import _paired, paired_difference, row_groups
+    interval: pairs resampled within each plan's trials, so the interval is conditional on
+    the plans. ``trials`` may hold several regimes (a 'regime' column). Every regime runs
+    at the sweep's seed on objects of the same names, and a cell's random streams are
+    keyed by seed, scene name and realisation (harness.pipeline.open_cell), so trial i of
+    an object meets the same approach, friction and pressure deviates, and shape samples
+    drawn from the same numbers, in every regime: those trials are resampled together (one
+    draw of trial indices per object and realisation, applied to every regime). Resampling
+    each regime's plans on their own treated them as independent and gave pooled intervals
+    too narrow; for a single regime the two are the same, bit for bit."""
+    from harness.report import _paired, linked_difference
 
-    if "regime" in trials.columns:
-        trials = trials.assign(scene=trials.regime + "/" + trials.scene)
-    m = _paired(trials, a, b, "posterior")
+    if "regime" not in trials.columns:
+        trials = trials.assign(regime="")
+    m = _paired(trials.assign(scene=trials.regime + "/" + trials.scene), a, b, "posterior")
     if m.empty:
         return {"pairs": 0, "difference": math.nan, "ci_low": math.nan, "ci_high": math.nan}
+    parts = m.scene.str.split("/", n=1, expand=True)
+    frame = m.assign(regime=parts[0], scene=parts[1], d=(m.a - m.b).astype(float))
     rng = np.random.default_rng(np.random.SeedSequence([seed, 0x5EE9]))
-    return paired_difference((m.a - m.b).to_numpy(), row_groups(m, ["scene", "realisation"]), rng)
+    return linked_difference(frame, ["scene", "realisation"], "regime", rng)
 
 
 def _pooled(runs: dict, regimes, held: set) -> dict:

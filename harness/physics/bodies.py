@@ -8,6 +8,7 @@ import hashlib
 import math
 import os
 import tempfile
+import threading
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -292,11 +293,12 @@ def _compound_text(cores: list, thickness: float) -> str:
 
 
 def _mesh_file(text: str) -> Path:
-    """``text`` written to a temporary OBJ file. The name holds this process's id and a
-    hash of the text: no other process touches it, and a name always means the same
-    shape."""
+    """``text`` written to a temporary OBJ file. The name holds this process's id, this
+    thread's (a Dask worker may run tasks in several threads, each building bodies) and a
+    hash of the text: no other process or thread touches it, and a name always means the
+    same shape."""
     digest = hashlib.sha256(text.encode()).hexdigest()[:20]
-    path = Path(tempfile.gettempdir()) / f"gpis-harness-body-{os.getpid()}-{digest}.obj"
+    path = Path(tempfile.gettempdir()) / f"gpis-harness-body-{os.getpid()}-{threading.get_ident()}-{digest}.obj"
     path.write_text(text)
     return path
 

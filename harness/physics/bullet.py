@@ -186,7 +186,8 @@ class _Slot(TrialMachine):
             limits.append(info[9] if closes_up else info[8])
             pb.resetJointState(self.grip, joint, q0, physicsClientId=c)
             pb.setJointMotorControl2(self.grip, joint, pb.POSITION_CONTROL, targetPosition=limits[-1],
-                                     force=g.force, maxVelocity=g.closing_speed, physicsClientId=c)
+                                     force=g.force, maxVelocity=g.closing_speed / abs(g.face_per_unit[jaw]),
+                                     physicsClientId=c)
         self.limits = tuple(limits)
         inertial = pb.getDynamicsInfo(self.grip, -1, physicsClientId=c)[3:5]
         self.pivot, self.pivot_orn = pb.invertTransform(*inertial)

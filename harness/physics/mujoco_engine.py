@@ -249,9 +249,16 @@ class _Slot(TrialMachine):
         return any(mujoco.mj_geomDistance(m, d, geom, self.table, limit, None) < limit for geom in self.touching)
 
     def blew_up(self) -> bool:
-        """With MuJoCo's automatic reset off (options_xml), a diverged state stays NaN."""
+        """With MuJoCo's automatic reset off (options_xml), a diverged state stays NaN. The
+        speed is the centre of mass's, as Bullet's base velocity is: a free joint's linear
+        velocity is its frame origin's (the polygon's origin here), to which the spin adds
+        omega x (centre of mass - origin); its angular velocity is in the body's frame."""
         p = self.protocol
-        vx, vy, vz, wx, wy, wz = self.obj_velocity.tolist()
+        self._kinematics()
+        d = self.data
+        spin = d.xmat[self.obj].reshape(3, 3) @ self.obj_velocity[3:]
+        vx, vy, vz = (self.obj_velocity[:3] + np.cross(spin, d.xipos[self.obj] - d.xpos[self.obj])).tolist()
+        wx, wy, wz = spin.tolist()
         # A speed that is NaN or infinite fails these comparisons too.
         if not (math.hypot(vx, vy, vz) <= p.max_speed and math.hypot(wx, wy, wz) <= p.max_spin):
             return True

@@ -345,8 +345,8 @@ class TrialMachine:
         if self.phase == "close":
             self._after_closing_step()
         elif self.tick % self.check_steps == 0 or self.tick >= self.phase_steps:
-            if self.blew_up():
-                return self._finish("unstable")
+            if self.blew_up():  # a trial that failed already (no early stop) keeps its first failure
+                return self._finish(self.failure or "unstable")
             if self.near_jaws(self.protocol.lost_distance) == 0:
                 self.quiet += 1
                 if self.quiet >= self.lost_checks:
@@ -362,12 +362,12 @@ class TrialMachine:
         g, p = self.trial.gripper, self.protocol
         states = self.jaw_states()
         (q0, v0), (q1, v1) = states
-        slow_speed = self.slow_speed
-        slow = abs(v0) < slow_speed and abs(v1) < slow_speed
+        slow_speed, (f0, f1) = self.slow_speed, g.face_per_unit  # the jaws' faces' speeds: joint speed x face per unit
+        slow = abs(v0 * f0) < slow_speed and abs(v1 * f1) < slow_speed
         shut = self.jaws_shut(states)
         self.quiet = self.quiet + 1 if slow else 0
         if self.blew_up():
-            return self._finish("unstable")
+            return self._finish(self.failure or "unstable")
         if not (shut or (self.quiet >= self.stall_steps and self.tick > 2) or self.tick >= self.close_steps):
             return
         faces = [g.face_at_zero[j] + g.face_per_unit[j] * s[0] for j, s in enumerate(states)]
