@@ -427,7 +427,7 @@ def calibration(data: dict) -> tuple[pd.DataFrame, pd.DataFrame]:
     post = data["trials"][data["trials"].shapes == "posterior"]
     per_plan = _plans_with_rates(data)
     rows, bins = [], []
-    edges = np.linspace(0, 1, RELIABILITY_BINS + 1)
+    edges = np.arange(RELIABILITY_BINS + 1) / RELIABILITY_BINS  # exact tenths: 0.3 opens its own bin
     key = ["scene", "realisation", "planner"]
     plan_of = pd.MultiIndex.from_frame(post[key])
     retests = {}  # per set of plans: P_F's and P_L's rows of a planner share it

@@ -361,3 +361,21 @@ def test_the_tables_do_not_depend_on_the_order_the_trials_were_recorded_in(run, 
     pd.testing.assert_frame_equal(comparisons(shuffled), comparisons(run))
     pd.testing.assert_frame_equal(calibration(shuffled)[0], calibration(run)[0])
     pd.testing.assert_frame_equal(leaderboard(shuffled), leaderboard(run))
+
+
+def test_a_reliability_bin_holds_the_estimates_at_its_lower_edge(run):
+    """Bins of a tenth, [k/10, (k+1)/10): an estimate of exactly 0.3, 0.6 or 0.7 (60 of 200
+    draws, say) is in the bin it opens (with edges from linspace, 0.3 fell below)."""
+    analytic = run["analytic"].copy()
+    for k, value in enumerate((0.3, 0.6, 0.7)):
+        analytic.loc[analytic.index[k], "p_l"] = value
+    _, bins = calibration({**run, "analytic": analytic})
+    p_l = bins[bins.metric == "p_l"]
+    # Each plan's bin counted in decimal arithmetic, where 0.3 is 0.3.
+    from collections import Counter
+    from decimal import Decimal
+
+    expected = Counter(min(int(Decimal(repr(v)) * 10), 9) for v in analytic.p_l)
+    assert {round(low * 10): n for low, n in zip(p_l.bin_low, p_l.plans) if n} == dict(expected)
+    for value in (0.3, 0.6, 0.7):
+        assert p_l[p_l.bin_low == value].bin_high.iloc[0] == pytest.approx(value + 0.1, abs=1e-12)
