@@ -358,6 +358,10 @@ def _plan(args) -> int:
     from planners.registry import make_planner
 
     scene = load_scene(args.scene)
+    keys = [key for key, _ in args.param or []]
+    twice = sorted({key for key in keys if keys.count(key) > 1})
+    if twice:
+        raise InputError("--param", None, f"{twice[0]} is given more than once")
     params = dict(args.param or [])
     planner = make_planner(args.planner, params)  # bad input stops here, before any work
     settings = _settings(args, scene)

@@ -43,7 +43,8 @@ def test_bad_command_line_gets_one_line_and_exit_code_2(capsys):
                  ["quality", "disk", "--grasp", "-0.04", "0", "0.04", "0", "--samples", "0"],
                  ["quality", "disk", "--grasp", "-0.04", "0", "0.04", "0", "--force", "0"],
                  ["quality", "disk", "--grasp", "-0.04", "0", "0.04", "0", "--force", "nan"],
-                 ["simulate", "disk", "--grasp", "-0.04", "0", "0.04", "0", "--force", "-5"]):
+                 ["simulate", "disk", "--grasp", "-0.04", "0", "0.04", "0", "--force", "-5"],
+                 ["plan", "disk", "--planner", "gp-p", "--param", "candidates=5", "--param", "candidates=6"]):
         assert main(argv) == 2, argv
         err = capsys.readouterr().err
         assert len(err.strip().splitlines()) == 1 and err.startswith("gpis-harness: error: "), (argv, err)
