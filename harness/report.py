@@ -197,14 +197,16 @@ def linked_difference(frame: pd.DataFrame, cell: list[str], member: str, rng: np
     wide = frame.pivot_table(index=[*cell, "trial"], columns=member, values="d", aggfunc="first")
     values = wide.to_numpy(dtype=float)
     present = ~np.isnan(values)
-    values = np.where(present, values, 0.0)
     sums, counts = np.zeros(BOOTSTRAP), np.zeros(BOOTSTRAP)
     cells = pd.Series(np.arange(len(wide)), index=wide.index.droplevel("trial"))
     for _, rows in cells.groupby(level=list(range(len(cell))), sort=True):
         rows = rows.to_numpy()
-        picks = rows[rng.integers(0, len(rows), size=(BOOTSTRAP, len(rows)))]
-        sums += values[picks].sum(axis=(1, 2))
-        counts += present[picks].sum(axis=(1, 2))
+        # Each member's trials in the cell, rescaled as a stratum (a member a cell lacks is
+        # absent from all its rows: NaN throughout, then 0 and not counted).
+        scaled = np.nan_to_num(rescaled(values[rows], axis=0))
+        picks = rng.integers(0, len(rows), size=(BOOTSTRAP, len(rows)))
+        sums += scaled[picks].sum(axis=(1, 2))
+        counts += present[rows][picks].sum(axis=(1, 2))
     boot = sums / counts
     return {"pairs": int(present.sum()), "difference": float(frame.d.mean()),
             "ci_low": float(np.percentile(boot, 2.5)), "ci_high": float(np.percentile(boot, 97.5))}
@@ -324,8 +326,21 @@ def _bootstrap_means(d: np.ndarray, groups: list[np.ndarray], rng: np.random.Gen
     total = np.zeros(BOOTSTRAP)
     for g in groups:
         picks = rng.integers(0, len(g), size=(BOOTSTRAP, len(g)))
-        total += d[g][picks].sum(axis=1)
+        total += rescaled(d[g])[picks].sum(axis=1)
     return total / len(d)
+
+
+def rescaled(x: np.ndarray, axis: int = 0) -> np.ndarray:
+    """A stratum's values for the bootstrap, their deviations from the stratum's mean
+    stretched by sqrt(n / (n - 1)) (Rao and Wu 1988, the rescaling bootstrap): resampling n
+    values with replacement gives their mean the variance (n - 1) / n s^2 / n, short of the
+    unbiased s^2 / n by a factor that matters for small strata (a plan's 4 true-shape
+    trials: intervals 13 % too narrow). The mean is kept; a stratum of one is left as it is."""
+    n = x.shape[axis]
+    if n < 2:
+        return x
+    mean = x.mean(axis=axis, keepdims=True)
+    return mean + math.sqrt(n / (n - 1)) * (x - mean)
 
 
 def plan_rates(post: pd.DataFrame) -> pd.DataFrame:

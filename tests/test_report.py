@@ -379,3 +379,23 @@ def test_a_reliability_bin_holds_the_estimates_at_its_lower_edge(run):
     assert {round(low * 10): n for low, n in zip(p_l.bin_low, p_l.plans) if n} == dict(expected)
     for value in (0.3, 0.6, 0.7):
         assert p_l[p_l.bin_low == value].bin_high.iloc[0] == pytest.approx(value + 0.1, abs=1e-12)
+
+
+def test_the_bootstrap_of_a_small_plan_has_the_unbiased_variance():
+    """Resampling a plan's n trials gives their mean the variance (n - 1)/n s^2/n; the
+    rescaled values (Rao and Wu) give s^2/n, the unbiased variance of the mean, which a
+    plan of 4 true-shape trials falls short of by a quarter otherwise. Checked on the
+    bootstrap's own replicates (2,000: the variance within 10 %, its Monte-Carlo error
+    about 3 %), with the mean kept."""
+    from harness.report import BOOTSTRAP, _bootstrap_means, rescaled
+
+    d = np.array([1.0, 0.0, 0.0, -1.0, 1.0, 1.0, 0.0, 1.0])  # two plans of 4 trials
+    groups = [np.arange(4), np.arange(4, 8)]
+    boot = _bootstrap_means(d, groups, np.random.default_rng(1))
+    assert len(boot) == BOOTSTRAP
+    unbiased = sum(d[g].var(ddof=1) * len(g) for g in groups) / len(d) ** 2  # var of the pooled mean
+    assert boot.var() == pytest.approx(unbiased, rel=0.10)
+    assert boot.var() > 1.15 * sum(d[g].var(ddof=0) * len(g) for g in groups) / len(d) ** 2  # not the biased one
+    for g in groups:
+        assert rescaled(d[g]).mean() == pytest.approx(d[g].mean(), abs=1e-15)
+    assert rescaled(np.array([0.5])).tolist() == [0.5]
