@@ -201,12 +201,16 @@ def linked_difference(frame: pd.DataFrame, cell: list[str], member: str, rng: np
     cells = pd.Series(np.arange(len(wide)), index=wide.index.droplevel("trial"))
     for _, rows in cells.groupby(level=list(range(len(cell))), sort=True):
         rows = rows.to_numpy()
-        # Each member's trials in the cell, rescaled as a stratum (a member a cell lacks is
-        # absent from all its rows: NaN throughout, then 0 and not counted).
-        scaled = np.nan_to_num(rescaled(values[rows], axis=0))
+        # Each member's trials in the cell, rescaled as a stratum over the trials it has (a
+        # member the cell lacks, or a trial it lacks, counts 0 and is not counted).
+        block, have = values[rows], present[rows]
+        n = have.sum(axis=0)
+        mean = np.nansum(block, axis=0) / np.maximum(n, 1)
+        factor = np.where(n > 1, np.sqrt(n / np.maximum(n - 1, 1)), 1.0)
+        scaled = np.where(have, mean + factor * (block - mean), 0.0)
         picks = rng.integers(0, len(rows), size=(BOOTSTRAP, len(rows)))
         sums += scaled[picks].sum(axis=(1, 2))
-        counts += present[rows][picks].sum(axis=(1, 2))
+        counts += have[picks].sum(axis=(1, 2))
     boot = sums / counts
     return {"pairs": int(present.sum()), "difference": float(frame.d.mean()),
             "ci_low": float(np.percentile(boot, 2.5)), "ci_high": float(np.percentile(boot, 97.5))}
