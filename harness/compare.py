@@ -24,6 +24,7 @@ import pandas as pd
 from harness.errors import InputError
 from harness.report import (ALL, comparison_pairs, expected, linked_difference, load, mcnemar, paired_difference,
                             row_groups)
+from harness.seeding import stream
 
 #: Config fields that decide the draws: runs that differ in one are not paired.
 PAIRING_FIELDS = ("seed", "realisations", "analytic_draws", "posterior_trials", "truth_trials", "settings")
@@ -55,8 +56,8 @@ def compare(dir_a: Path, dir_b: Path, engines: bool = False) -> dict:
     trials["b"] = (trials.outcome_b == "success").astype(int)
     scenes = [s for s in expected(a["config"])[0] if s in set(trials.scene)]
     planners = [p for p in expected(a["config"])[1] if p in set(trials.planner)]
-    rng = np.random.default_rng(np.random.SeedSequence([int(a["config"]["seed"]), 0xC0A7]))
-    cells = _cells(trials, scenes, planners, rng)
+    seed = int(a["config"]["seed"])
+    cells = _cells(trials, scenes, planners, seed)
     per_cell = cells[(cells.scene != ALL) & (cells.planner != ALL) & (cells.shapes != ALL)]
     worst = per_cell.difference.abs().idxmax()
     return {
@@ -68,7 +69,7 @@ def compare(dir_a: Path, dir_b: Path, engines: bool = False) -> dict:
         "spread": {"cells": len(per_cell), "rms": float(np.sqrt((per_cell.difference ** 2).mean())),
                    "max": float(per_cell.difference[worst]),
                    "max_at": " / ".join(per_cell.loc[worst, ["scene", "planner", "shapes"]])},
-        "planner_shifts": _planner_shifts(trials, a["config"], planners, rng),
+        "planner_shifts": _planner_shifts(trials, a["config"], planners, seed),
         "outcomes": pd.crosstab(trials.outcome_a, trials.outcome_b, rownames=["A"], colnames=["B"]),
     }
 
@@ -133,9 +134,9 @@ def config_differences(a: dict, b: dict) -> dict:
     return out
 
 
-def _cells(trials: pd.DataFrame, scenes: list[str], planners: list[str], rng: np.random.Generator) -> pd.DataFrame:
+def _cells(trials: pd.DataFrame, scenes: list[str], planners: list[str], seed: int) -> pd.DataFrame:
     """Per scene, planner and shape source, then pooled over scenes (scene 'all'), over
-    shape sources, and over everything."""
+    shape sources, and over everything; each interval from its own bootstrap stream."""
     rows = []
     selections = [(s, p, sh) for s in scenes for p in planners for sh in SHAPES]
     selections += [(ALL, p, sh) for p in planners for sh in (*SHAPES, ALL)]
@@ -151,6 +152,7 @@ def _cells(trials: pd.DataFrame, scenes: list[str], planners: list[str], rng: np
         # The planners of one cell share trial i's draws: pooled over planners, a cell's
         # trials are resampled together (linked_difference); per planner, within its plan.
         frame = t.assign(d=(t.b - t.a).astype(float))
+        rng = stream(seed, "bootstrap", "compare", scene, planner, shapes)
         diff = linked_difference(frame, ["scene", "realisation", "shapes"], "planner", rng)
         only_a, only_b, p = mcnemar(t.a.to_numpy(), t.b.to_numpy())
         rows.append({"scene": scene, "planner": planner, "shapes": shapes, "pairs": diff.pop("pairs"),
@@ -160,8 +162,7 @@ def _cells(trials: pd.DataFrame, scenes: list[str], planners: list[str], rng: np
     return pd.DataFrame(rows)
 
 
-def _planner_shifts(trials: pd.DataFrame, config: dict, planners: list[str],
-                    rng: np.random.Generator) -> pd.DataFrame:
+def _planner_shifts(trials: pd.DataFrame, config: dict, planners: list[str], seed: int) -> pd.DataFrame:
     """How each planner comparison of the report (planner - versus, pooled over scenes)
     moved from A to B, on posterior samples, on the true shape and on both, paired on
     (scene, realisation, shapes, trial)."""
@@ -177,6 +178,7 @@ def _planner_shifts(trials: pd.DataFrame, config: dict, planners: list[str],
             if m.empty:
                 continue
             da, db = (m.a_x - m.a_y).to_numpy(), (m.b_x - m.b_y).to_numpy()
+            rng = stream(seed, "bootstrap", "compare-shift", x, y, shapes)
             shift = paired_difference(db - da, row_groups(m, ["scene", "realisation", "shapes"]), rng)
             rows.append({"planner": x, "versus": y, "shapes": shapes, "pairs": shift["pairs"],
                          "difference_a": float(da.mean()), "difference_b": float(db.mean()),

@@ -236,9 +236,10 @@ def comparisons(data: dict, seed: int = 0) -> pd.DataFrame:
     bootstrap 95 % interval (trials resampled in pairs within each plan's trials of one
     shape source, so the interval is conditional on the plans), and McNemar's exact p on
     the discordant pairs."""
+    from harness.seeding import stream
+
     config, trials = data["config"], data["trials"]
     scenes = expected(config)[0]
-    rng = np.random.default_rng(np.random.SeedSequence([seed, 0x7EB0]))
     rows = []
     for a, b in comparison_pairs(config):
         by_source = {shapes: _paired(trials, a, b, shapes).assign(shapes=shapes) for shapes in ("posterior", "truth")}
@@ -249,6 +250,9 @@ def comparisons(data: dict, seed: int = 0) -> pd.DataFrame:
                 if s.empty:
                     continue
                 groups = row_groups(s, ["shapes", "scene", "realisation"])
+                # Each interval its own stream: another planner in the report, or one more
+                # pair, leaves this pair's interval as it was.
+                rng = stream(seed, "bootstrap", "comparison", a, b, shapes, scene)
                 diff = paired_difference((s.a - s.b).to_numpy(), groups, rng)
                 n10, n01, p = mcnemar(s.a.to_numpy(), s.b.to_numpy())
                 rows.append({"scene": scene, "shapes": shapes, "planner": a, "versus": b, **diff,
@@ -274,9 +278,10 @@ def leaderboard(data: dict, seed: int = 0) -> pd.DataFrame:
     pooled = s[s.scene == ALL].sort_values(["success_rate", "truth_success_rate"], ascending=False, kind="stable")
     if pooled.empty or pooled.success_rate.isna().all():
         return pd.DataFrame(columns=LEADERBOARD_COLUMNS)
+    from harness.seeding import stream
+
     trials = data["trials"]
     best = pooled.planner.iloc[0]
-    rng = np.random.default_rng(np.random.SeedSequence([seed, 0x1EAD]))
     rows = []
     for r in pooled.itertuples():
         m = _paired(trials, r.planner, best, "posterior")
@@ -285,6 +290,7 @@ def leaderboard(data: dict, seed: int = 0) -> pd.DataFrame:
             n10 = n01 = 0
             p = 1.0 if r.planner == best else np.nan
         else:
+            rng = stream(seed, "bootstrap", "leaderboard", r.planner, best)  # its own, as in comparisons
             diff = paired_difference((m.a - m.b).to_numpy(), row_groups(m, ["scene", "realisation"]), rng)
             n10, n01, p = mcnemar(m.a.to_numpy(), m.b.to_numpy())
         truth = trials[(trials.planner == r.planner) & (trials.shapes == "truth")]

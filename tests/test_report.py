@@ -399,3 +399,24 @@ def test_the_bootstrap_of_a_small_plan_has_the_unbiased_variance():
     for g in groups:
         assert rescaled(d[g]).mean() == pytest.approx(d[g].mean(), abs=1e-15)
     assert rescaled(np.array([0.5])).tolist() == [0.5]
+
+
+def test_another_planner_in_the_report_leaves_the_others_intervals_as_they_were(run):
+    """Each interval draws its bootstrap from a stream of its own (seed, the pair, the
+    shape source, the scene): a planner added to an experiment, a plugin under development
+    say, listed before the others, leaves the baselines' comparisons bit for bit (with one
+    stream for the whole table, its pairs took the others' random numbers)."""
+    extra = run["trials"][run["trials"].planner == "gp-p"].assign(planner="extra")
+    extra.loc[extra.index[::3], "outcome"] = "dropped"
+    config = dict(run["config"])
+    config["planners"] = [config["planners"][0], {"label": "extra", "name": "gp-p", "params": {"x": 1}},
+                          *config["planners"][1:]]
+    more = {**run, "config": config, "trials": pd.concat([run["trials"], extra], ignore_index=True),
+            "plans": pd.concat([run["plans"], run["plans"][run["plans"].planner == "gp-p"].assign(planner="extra")]),
+            "analytic": pd.concat([run["analytic"],
+                                   run["analytic"][run["analytic"].planner == "gp-p"].assign(planner="extra")])}
+    before, after = comparisons(run), comparisons(more)
+    assert set(after.planner) == {"gp-p", "extra"}
+    kept = after[(after.planner == "gp-p") & (after.versus == "mean-shape")].reset_index(drop=True)
+    pd.testing.assert_frame_equal(kept, before.reset_index(drop=True))
+    assert (kept.ci_high > kept.ci_low).any()  # real intervals, not all of zero width
