@@ -328,9 +328,14 @@ def test_the_engines_study_reports_the_runs_own_counts(quick_runs, tmp_path):
     report = pd.read_csv(quick_runs / "pb" / "comparisons.csv")
     pairs = {(r.planner, r.versus) for r in report.itertuples()}
     assert {(c["planner"], c["versus"]) for c in res["comparisons"]} == pairs
+    # Each comparison's change from one engine to the other, paired trial by trial: the
+    # difference of the two differences on the same pairs, inside its own interval.
+    for c in res["comparisons"]:
+        assert c["shift"] == pytest.approx(c["difference"][1] - c["difference"][0], abs=1e-12)
+        assert c["shift_ci"][0] <= c["shift"] <= c["shift_ci"][1]
     assert res["engines"] == ["pybullet", "mujoco"]
     text = "\n".join(format_lines(res))
-    assert "pybullet 3.2.7 against mujoco" in text and "paired trials" in text
+    assert "pybullet 3.2.7 against mujoco" in text and "paired trials" in text and "(paired)" in text
     # With the bars of bench lift (as bench engines runs them): one row per bar in each engine.
     row = {"bar": "bar 18 x 3 x 3 cm", "points": [{"offset": 0.0}, {"offset": 0.004}], "p_l_at": 0.03,
            "success_at": 0.028, "error": 0.07, "model_turning_at": 0.03, "turning_at": None, "turning_error": None,

@@ -108,19 +108,28 @@ def study(dir_a: Path, dir_b: Path, frames: Path | None = None) -> dict:
                           "order": [list(g.sort_values(f"success_rate_{k}", ascending=False, kind="stable").planner)
                                     for k in "ab"]}
     taus = [v["tau"] for s, v in ranking.items() if s != ALL and v["tau"] is not None]
-    ca, cb = (comparisons(x) for x in (a, b))
+    ca, cb = (comparisons(x, seed=int(x["config"]["seed"])) for x in (a, b))
     keys = ["scene", "shapes", "planner", "versus"]
     cmp = ca.merge(cb, on=keys, suffixes=("_a", "_b"))
     cmp = cmp[cmp.scene == ALL]
+    # Whether the intervals overlap is no test of a change (the runs are paired trial by
+    # trial); compare's planner shifts are: the change of each difference from A to B, with
+    # its paired bootstrap interval.
+    shifts = paired["planner_shifts"].set_index(["planner", "versus", "shapes"])
     verdicts = []
     for r in cmp.itertuples():
         sig = [_verdict(r.ci_low_a, r.ci_high_a), _verdict(r.ci_low_b, r.ci_high_b)]
+        key = (r.planner, r.versus, r.shapes)
+        shift = shifts.loc[key] if key in shifts.index else None
         verdicts.append({"planner": r.planner, "versus": r.versus, "shapes": r.shapes,
                          "difference": [r.difference_a, r.difference_b],
                          "ci": [[r.ci_low_a, r.ci_high_a], [r.ci_low_b, r.ci_high_b]],
                          "verdict": sig, "same_sign": bool(np.sign(r.difference_a) == np.sign(r.difference_b)),
                          "same_verdict": sig[0] == sig[1],
-                         "intervals_overlap": bool(r.ci_low_a <= r.ci_high_b and r.ci_low_b <= r.ci_high_a)})
+                         "intervals_overlap": bool(r.ci_low_a <= r.ci_high_b and r.ci_low_b <= r.ci_high_a),
+                         "shift": None if shift is None else float(shift["shift"]),
+                         "shift_ci": None if shift is None else [float(shift["shift_ci_low"]),
+                                                                 float(shift["shift_ci_high"])]})
     cal = {}
     for name, run in zip(names, (a, b)):
         table = calibration(run)[0]
@@ -223,6 +232,9 @@ def format_lines(res: dict) -> list[str]:
         (da, db), ((la, ha), (lb, hb)) = c["difference"], c["ci"]
         mark = ("same verdict" if c["same_verdict"] else "verdict changes") + (
             "" if c["intervals_overlap"] else ", intervals apart")
+        if c.get("shift") is not None:
+            (sl, sh) = c["shift_ci"]
+            mark += f"; change {c['shift']:+.3f} [{sl:+.3f}, {sh:+.3f}] (paired)"
         lines.append(f"  {c['planner']} vs {c['versus']} ({c['shapes']}): {da:+.3f} [{la:+.3f}, {ha:+.3f}] | "
                      f"{db:+.3f} [{lb:+.3f}, {hb:+.3f}]; {mark}")
     for name, cal in res["calibration"].items():
