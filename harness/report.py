@@ -203,11 +203,8 @@ def linked_difference(frame: pd.DataFrame, cell: list[str], member: str, rng: np
         rows = rows.to_numpy()
         # Each member's trials in the cell, rescaled as a stratum over the trials it has (a
         # member the cell lacks, or a trial it lacks, counts 0 and is not counted).
-        block, have = values[rows], present[rows]
-        n = have.sum(axis=0)
-        mean = np.nansum(block, axis=0) / np.maximum(n, 1)
-        factor = np.where(n > 1, np.sqrt(n / np.maximum(n - 1, 1)), 1.0)
-        scaled = np.where(have, mean + factor * (block - mean), 0.0)
+        have = present[rows]
+        scaled = rescaled(values[rows], have)
         picks = rng.integers(0, len(rows), size=(BOOTSTRAP, len(rows)))
         sums += scaled[picks].sum(axis=(1, 2))
         counts += have[picks].sum(axis=(1, 2))
@@ -340,17 +337,20 @@ def _bootstrap_means(d: np.ndarray, groups: list[np.ndarray], rng: np.random.Gen
     return total / len(d)
 
 
-def rescaled(x: np.ndarray, axis: int = 0) -> np.ndarray:
+def rescaled(x: np.ndarray, have: np.ndarray | None = None) -> np.ndarray:
     """A stratum's values for the bootstrap, their deviations from the stratum's mean
     stretched by sqrt(n / (n - 1)) (Rao and Wu 1988, the rescaling bootstrap): resampling n
     values with replacement gives their mean the variance (n - 1) / n s^2 / n, short of the
     unbiased s^2 / n by a factor that matters for small strata (a plan's 4 true-shape
-    trials: intervals 13 % too narrow). The mean is kept; a stratum of one is left as it is."""
-    n = x.shape[axis]
-    if n < 2:
-        return x
-    mean = x.mean(axis=axis, keepdims=True)
-    return mean + math.sqrt(n / (n - 1)) * (x - mean)
+    trials: intervals 13 % too narrow). The mean is kept; a stratum of one is left as it is.
+    ``x`` (n,) is one stratum, or (n, k) k strata side by side (linked_difference's
+    members), each over the rows ``have`` marks (the others come back as 0)."""
+    if have is None:
+        have = np.ones(x.shape, dtype=bool)
+    n = have.sum(axis=0)
+    mean = np.where(have, x, 0.0).sum(axis=0) / np.maximum(n, 1)
+    factor = np.sqrt(np.where(n > 1, n / np.maximum(n - 1, 1), 1.0))
+    return np.where(have, mean + factor * (x - mean), 0.0)
 
 
 def plan_rates(post: pd.DataFrame) -> pd.DataFrame:
