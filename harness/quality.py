@@ -24,10 +24,17 @@ FAILURE_REASONS = PLANAR_REASONS + LIFT_REASONS
 #: The verdicts of a lifted draw as the ledger stores them: held level, or turned by the
 #: weight and still lifted (harness.pipeline.verdict_label).
 LIFTED_VERDICTS = ("lifted", "lifted_turned")
-#: Fields of samples in several pieces whose bodies (harness.grasp.body_fields) are
-#: built at once while judging the lift: bounds the memory that costs (about 70 M^2 bytes
-#: per field) whatever the share of such samples.
-BODY_CHUNK = 32
+#: Memory (bytes) for the fields of samples in several pieces whose bodies
+#: (harness.grasp.body_fields) are built and judged at once while judging the lift (at
+#: BODY_FIELD_BYTES M^2 a field, 137 fields at M = 50): bounds it whatever the share of
+#: such samples. Each group's push and squeeze are a call of their own, whose steps cost a
+#: contact search of about 1 ms however few their draws; groups of 32 fields (the bound
+#: until 2026-11-29, about 5.6 MB at M = 50) made the can opener's gp-p-lift plan 1.4
+#: times as long (its draws are in pieces one time in two), for no lower peak.
+BODY_BYTES = 24e6
+#: Bytes per body field over M^2, a bound: building 137 of the can opener's at M = 50
+#: peaked at 44 M^2 bytes a field and kept 16 M^2 (tracemalloc, 2026-11-29).
+BODY_FIELD_BYTES = 70.0
 #: Two-sided 95 % normal quantile.
 Z95 = 1.959963984540054
 
@@ -405,8 +412,9 @@ def _on_bodies(g1, g2, field, draws: EvaluationDraws, contacts: Contacts, closur
     closure = closure.copy()
     pieces = []
     fragmented = np.unique(field[on_split])
-    for start in range(0, len(fragmented), BODY_CHUNK):  # a bounded number of body fields at once
-        ids = fragmented[start:start + BODY_CHUNK]
+    chunk = max(1, int(BODY_BYTES / (BODY_FIELD_BYTES * draws.shapes.grid.size ** 2)))
+    for start in range(0, len(fragmented), chunk):  # a bounded number of body fields at once
+        ids = fragmented[start:start + chunk]
         rows = np.flatnonzero(np.isin(field, ids))
         local = np.searchsorted(ids, field[rows])
         bodies = body_fields(draws.shapes, ids)
@@ -437,6 +445,11 @@ def estimate_p_f(grasps, draws: EvaluationDraws, settings: GraspSettings, lift: 
 #: block every 100 draws (2026-11-29; the plans the same with every choice:
 #: docs/planners.md, "Helpers").
 RANK_ENDS = (100, 250, 500)
+#: With a floor, ranking_scores judges at most this many (grasp, draw) pairs in one call
+#: (each call's arrays grow with its pairs), however many candidates a caller scores at
+#: once: a chunk of 10 candidates (planners.sampling.CHUNK) on 1000 draws, as many as one
+#: call judges without a floor.
+RANK_PAIRS = 10_000
 #: A grasp is dropped only when even a chance of 1 on every draw left would keep its score
 #: this far below the bar: the sums' rounding (about 1e-13 over 1000 draws) cannot make it
 #: win, so the pick and its score are those of judging every grasp on every draw.
@@ -477,10 +490,14 @@ def ranking_scores(grasps, draws: EvaluationDraws, settings: GraspSettings, lift
     floor = float(floor)
 
     def judge_rows(rows, lo, hi):
-        grasp_of, draw_of = np.repeat(rows, hi - lo), np.tile(np.arange(lo, hi), len(rows))
-        out = evaluate_pairs(starts[grasp_of], draw_of, draws, settings, lift)
-        chance[grasp_of, draw_of] = out.lift_chance if lift else out.closure
-        fc[grasp_of, draw_of] = out.ferrari_canny
+        # At most RANK_PAIRS pairs a call: each pair's outcome does not depend on the
+        # others in its call, so the split bounds the memory and changes no number.
+        grasp_all, draw_all = np.repeat(rows, hi - lo), np.tile(np.arange(lo, hi), len(rows))
+        for first in range(0, len(grasp_all), RANK_PAIRS):
+            grasp_of, draw_of = grasp_all[first:first + RANK_PAIRS], draw_all[first:first + RANK_PAIRS]
+            out = evaluate_pairs(starts[grasp_of], draw_of, draws, settings, lift)
+            chance[grasp_of, draw_of] = out.lift_chance if lift else out.closure
+            fc[grasp_of, draw_of] = out.ferrari_canny
         judged[rows] = hi
 
     ends = [e for e in RANK_ENDS if e < n] + [n]

@@ -255,6 +255,47 @@ def test_gp_gpis_opt_cut_short_by_its_budget_executes_only_a_feasible_grasp(beli
     assert "stopped at the time budget" in plan.message
 
 
+def test_a_bounded_search_sizes_its_chunks_by_the_budget_left():
+    """planners.sampling._chunk_size on a clock whose time is set: CHUNK first and always
+    in an unbounded search; every candidate left without a budget; with one, as many as the
+    rate so far says fit in BUDGET_SHARE of the budget left, never fewer than CHUNK."""
+    from planners.sampling import BUDGET_SHARE, CHUNK, _chunk_size
+
+    class Clock:
+        def __init__(self, budget, now):
+            self.budget, self.now = budget, now
+
+        def elapsed(self):
+            return self.now
+
+    assert _chunk_size(Clock(None, 5.0), 1.0, 0, 90, True) == CHUNK
+    assert _chunk_size(Clock(None, 5.0), 1.0, 10, 90, False) == CHUNK
+    assert _chunk_size(Clock(None, 5.0), 1.0, 10, 90, True) == 90
+    assert _chunk_size(Clock(None, 5.0), 1.0, 10, 4, False) == 4
+    # 10 candidates in 2 s since the search began (0.2 s each); 60 - 3 s left.
+    assert _chunk_size(Clock(60.0, 3.0), 1.0, 10, 1000, True) == int(BUDGET_SHARE * 57.0 / 0.2)
+    assert _chunk_size(Clock(60.0, 3.0), 1.0, 10, 90, True) == 90
+    assert _chunk_size(Clock(4.0, 3.0), 1.0, 10, 90, True) == CHUNK  # 2.5 fit: CHUNK
+    assert _chunk_size(Clock(2.0, 3.0), 1.0, 10, 90, True) == CHUNK  # past the budget
+
+
+def test_gp_p_scores_its_candidates_in_two_chunks_and_plans_as_in_chunks_of_ten(beliefs, monkeypatch):
+    """Without a budget gp-p's bounded search scores CHUNK candidates, then the rest at
+    once; its grasp, estimate and work are those of scoring them CHUNK at a time (the
+    search before 2026-11-29)."""
+    import planners.sampling as sampling
+
+    problem = Problem.for_belief(beliefs("tape"))
+    planner = GPP(samples=300, candidates=40, quality="lift")
+    wide = planner.plan(problem, stream(3, "tape", "chunks"))
+    monkeypatch.setattr(sampling, "_chunk_size", lambda clock, searching, done, left, bounded: min(sampling.CHUNK,
+                                                                                                      left))
+    narrow = planner.plan(problem, stream(3, "tape", "chunks"))
+    assert [t[1] for t in wide.trace] == [10, 40] and [t[1] for t in narrow.trace] == [10, 20, 30, 40]
+    assert wide.grasp == narrow.grasp and wide.estimate == narrow.estimate and wide.evaluations == 40
+    assert [t[2] for t in wide.trace][-1] == narrow.trace[-1][2]
+
+
 def test_planners_report_a_trace_and_their_work(beliefs):
     problem = Problem.for_belief(beliefs("disk"))
     for planner in (MeanShape(), GPP(samples=200, candidates=20), GPGPISOpt(), GPBandit()):

@@ -110,6 +110,54 @@ def test_ranking_with_a_floor_drops_only_grasps_that_cannot_win(rectangle, lift)
         assert (~kept).sum() >= 3, (floor, score)
 
 
+def test_ranking_splits_its_calls_without_changing_a_number(rectangle, monkeypatch):
+    """ranking_scores judges at most RANK_PAIRS (grasp, draw) pairs a call, however many
+    grasps and draws it is given: with a bound of 250 pairs the calls do split (the first
+    block's 800 pairs, the leader's 900 draws), and every score and tie-break is the same
+    bit for bit as with a call for each block."""
+    import harness.quality as quality
+
+    _, draws = rectangle
+    grasps = np.stack([through_centre(a).array for a in (0, 2, 4, 6, 8, 10, 30, 60)])
+    s = settings(0.004)
+    whole = ranking_scores(grasps, draws, s, True, floor=-np.inf)
+    sizes = []
+    judge = quality.evaluate_pairs
+
+    def counted(starts, index, *args, **kwargs):
+        sizes.append(len(index))
+        return judge(starts, index, *args, **kwargs)
+
+    monkeypatch.setattr(quality, "evaluate_pairs", counted)
+    monkeypatch.setattr(quality, "RANK_PAIRS", 250)
+    split = ranking_scores(grasps, draws, s, True, floor=-np.inf)
+    assert max(sizes) == 250 and len(sizes) >= 8, sizes
+    assert np.isfinite(whole[0]).sum() >= 3  # grasps were judged beyond the first block
+    np.testing.assert_array_equal(split[0], whole[0])
+    np.testing.assert_array_equal(split[1], whole[1])
+
+
+def test_the_bodies_of_samples_in_pieces_are_judged_alike_in_groups_of_any_size(monkeypatch):
+    """The lift's outcomes on samples in several pieces (judged on their bodies, a group of
+    body fields at a time: BODY_BYTES) are the same bit for bit with groups of 2 fields as
+    with the default's one group, on the stapler's draws, many of them in pieces."""
+    import harness.quality as quality
+
+    scene = load_scene("stapler")
+    belief = build_belief(scene, stream(0, "stapler", 0, "sensor"))
+    draws = draw_evaluation(belief, 300, *default_streams(0, "stapler"))
+    fragmented = int(draws.shapes.regions.fragmented.sum())
+    grasps = np.array([[[-0.03, -0.04], [-0.03, 0.03]], [[0.0, -0.04], [0.0, 0.03]]])
+    s = resolve(scene)
+    assert 8 <= fragmented < quality.BODY_BYTES / (quality.BODY_FIELD_BYTES * draws.shapes.grid.size ** 2)
+    one = evaluate_draws(grasps, draws, s)
+    monkeypatch.setattr(quality, "BODY_BYTES", 2.5 * quality.BODY_FIELD_BYTES * draws.shapes.grid.size ** 2)
+    groups = evaluate_draws(grasps, draws, s)
+    for name in ("closure", "lifted", "reason", "pivots", "ferrari_canny", "lift_chance", "squeezed", "pushed"):
+        np.testing.assert_array_equal(getattr(groups, name), getattr(one, name), err_msg=name)
+    assert one.lifted[:, draws.shapes.regions.fragmented].any()  # the bodies were judged
+
+
 def test_a_draw_pool_holds_the_same_draws_as_draw_evaluation(rectangle):
     """On the rectangle, 250 draws come block by block (the weight-space sampler) and 120
     at once (pathwise, whose stream depends on the split): either way the pool's draws are
