@@ -28,13 +28,15 @@ class GPP(Planner):
     def shape_samples(self) -> int:
         return self.samples
 
-    def plan(self, problem: Problem, rng: np.random.Generator, record: list | None = None) -> Plan:
+    def plan(self, problem: Problem, rng: np.random.Generator, record: list | None = None,
+             fixed_chunks: bool = False) -> Plan:
         """As Planner.plan; ``record`` (a list) receives (seconds, grasps, P_F) per chunk of
-        candidates, for convergence studies."""
+        candidates, for convergence studies; ``fixed_chunks``: score the candidates ten at a
+        time (planners.sampling.search; the same plan, for benchmarks)."""
         # The best estimate of many is biased upwards (the winner's curse); the harness
         # re-estimates every returned grasp on its own evaluation draws.
         return search(problem, rng, self.candidates, self.angular_noise_deg, self._score, setup=self._setup,
-                      estimate_of=lambda best: best, record=record, bounded=True)
+                      estimate_of=lambda best: best, record=record, bounded=True, fixed_chunks=fixed_chunks)
 
     def _setup(self, problem: Problem, rng: np.random.Generator):
         # The pool drawn block by block, as gp-bandit draws it (harness.quality.DrawPool):

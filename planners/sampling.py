@@ -35,7 +35,7 @@ def _chunk_size(clock: Stopwatch, searching: float, done: int, left: int, bounde
 
 
 def search(problem: Problem, rng: np.random.Generator, count: int, angular_noise_deg: float, score, setup=None,
-           estimate_of=None, record=None, bounded: bool = False) -> Plan:
+           estimate_of=None, record=None, bounded: bool = False, fixed_chunks: bool = False) -> Plan:
     """Generate ``count`` candidates, score them in chunks with
     ``score(grasps (k, 2, 2), state) -> (values (k,), tie_break (k,))`` (higher is better,
     compared as pairs; ``state`` is what ``setup(problem, rng)`` returned), keep the best,
@@ -47,7 +47,8 @@ def search(problem: Problem, rng: np.random.Generator, count: int, angular_noise
     studies read every candidate's value. Chunks hold CHUNK candidates, except in a
     bounded search after the first (:func:`_chunk_size`). The best is the first candidate
     with the highest (value, tie-break) however the chunks fall, so the plan does not
-    depend on them unless the budget stops the search."""
+    depend on them unless the budget stops the search. ``fixed_chunks``: CHUNK candidates
+    a chunk in a bounded search too (as before 2026-11-29; `bench planning` times both)."""
     clock = Stopwatch(problem.time_budget_s)
     belief = problem.belief
     if belief.mean_shape.is_empty:
@@ -64,7 +65,8 @@ def search(problem: Problem, rng: np.random.Generator, count: int, angular_noise
     searching = clock.elapsed()
     start = 0
     while start < len(grasps):
-        chunk = grasps[start:start + _chunk_size(clock, searching, start, len(grasps) - start, bounded)]
+        size = _chunk_size(clock, searching, start, len(grasps) - start, bounded and not fixed_chunks)
+        chunk = grasps[start:start + size]
         scored = score(chunk, state, floor=best_key[0]) if bounded else score(chunk, state)
         values, tie = (np.asarray(a, dtype=float) for a in scored)
         if record is not None:

@@ -279,18 +279,14 @@ def test_a_bounded_search_sizes_its_chunks_by_the_budget_left():
     assert _chunk_size(Clock(2.0, 3.0), 1.0, 10, 90, True) == CHUNK  # past the budget
 
 
-def test_gp_p_scores_its_candidates_in_two_chunks_and_plans_as_in_chunks_of_ten(beliefs, monkeypatch):
+def test_gp_p_scores_its_candidates_in_two_chunks_and_plans_as_in_chunks_of_ten(beliefs):
     """Without a budget gp-p's bounded search scores CHUNK candidates, then the rest at
     once; its grasp, estimate and work are those of scoring them CHUNK at a time (the
-    search before 2026-11-29)."""
-    import planners.sampling as sampling
-
+    search before 2026-11-29, ``fixed_chunks``)."""
     problem = Problem.for_belief(beliefs("tape"))
     planner = GPP(samples=300, candidates=40, quality="lift")
     wide = planner.plan(problem, stream(3, "tape", "chunks"))
-    monkeypatch.setattr(sampling, "_chunk_size", lambda clock, searching, done, left, bounded: min(sampling.CHUNK,
-                                                                                                      left))
-    narrow = planner.plan(problem, stream(3, "tape", "chunks"))
+    narrow = planner.plan(problem, stream(3, "tape", "chunks"), fixed_chunks=True)
     assert [t[1] for t in wide.trace] == [10, 40] and [t[1] for t in narrow.trace] == [10, 20, 30, 40]
     assert wide.grasp == narrow.grasp and wide.estimate == narrow.estimate and wide.evaluations == 40
     assert [t[2] for t in wide.trace][-1] == narrow.trace[-1][2]

@@ -29,6 +29,12 @@ CONVERGENCE_INITS = (1, 2, 3, 5, 10)
 #: The lift variants compared (label, registry name, parameters).
 LIFT_PLANNERS = (("gp-p-lift", "gp-p", {"quality": "lift"}), ("gp-gpis-opt-lift", "gp-gpis-opt", {"quality": "lift"}))
 LIFT_SEEDS = 3
+#: Scenes on which gp-p-lift is timed with its candidates ten at a time and in chunks sized
+#: by the budget (planners.sampling.search): samples in pieces one time in two (the can
+#: opener), candidates that spread (the tape, the stapler), and none that can be dropped
+#: (the disk).
+CHUNK_SCENES = ("can_opener", "tape", "stapler", "disk")
+CHUNK_ROUNDS = 2
 
 
 @dataclass(frozen=True)
@@ -91,6 +97,35 @@ def _planner_row(scene_name: str, size: int) -> dict:
             best = min(best, time.perf_counter() - t0)
         out[name] = best / getattr(planner, per)
     return out
+
+
+def _chunks_row(scene_name: str) -> dict:
+    """gp-p-lift on the scene's first cell (make eval's seed and realisation 0, no budget),
+    in a fresh process: its candidates scored ten at a time and in the search's chunks,
+    in turn, CHUNK_ROUNDS times each (best of each), and whether both give the same grasp
+    and estimate."""
+    from harness.belief import build_belief
+    from harness.grasp import load_kernels
+    from harness.scene import load_scene
+    from harness.seeding import stream
+    from planners.base import Problem
+    from planners.gp_p import GPP
+
+    load_kernels()
+    scene = load_scene(scene_name)
+    belief = build_belief(scene, stream(0, scene_name, 0, "sensor")).prepare()
+    problem = Problem.for_belief(belief)
+    planner = GPP(quality="lift")
+    best = {True: math.inf, False: math.inf}
+    plans = {}
+    for r in range(CHUNK_ROUNDS):
+        for fixed in ((True, False) if r % 2 == 0 else (False, True)):
+            t0 = time.perf_counter()
+            plans[fixed] = planner.plan(problem, stream(0, scene_name, 0, "planner", "gp-p-lift"), fixed_chunks=fixed)
+            best[fixed] = min(best[fixed], time.perf_counter() - t0)
+    same = plans[True].grasp == plans[False].grasp and plans[True].estimate == plans[False].estimate
+    return {"scene": scene_name, "tens_s": best[True], "chunks_s": best[False], "speedup": best[True] / best[False],
+            "chunks": len(plans[False].trace), "same_plan": bool(same)}
 
 
 def _convergence(seed: int) -> dict:
@@ -174,6 +209,7 @@ def benchmark(settings: Settings = Settings()) -> dict:
     lift_rows = [in_fresh_process(scene_quality, name, LIFT_PLANNERS, "p_l", LIFT_SEEDS)
                  for name in library_names()]
     convergence = [in_fresh_process(_convergence, seed) for seed in range(CONVERGENCE_SEEDS)]
+    chunks = [in_fresh_process(_chunks_row, name) for name in CHUNK_SCENES]
     ms = np.array([r["M"] for r in rows], dtype=float)
 
     def growth(values):
@@ -189,7 +225,8 @@ def benchmark(settings: Settings = Settings()) -> dict:
             "planner_scene": PLANNER_SCENE, "scp_s_per_init": scp, "gpp_s_per_candidate": gpp,
             "scp_over_gpp": {m: scp[m] / gpp[m] for m in scp},
             "scp_growth_exponent": growth(list(scp.values())), **_convergence_summary(convergence),
-            "lift_planners": _lift_summary(lift_rows), "bandit": bandit_study.benchmark(settings.bandit)}
+            "lift_planners": _lift_summary(lift_rows), "search_chunks": chunks,
+            "bandit": bandit_study.benchmark(settings.bandit)}
 
 
 def format_lines(res: dict) -> list[str]:
@@ -221,6 +258,12 @@ def format_lines(res: dict) -> list[str]:
     lines.append(f"lift planners over the library ({lift['seeds']} seeds, P_L on 1000 evaluation draws): "
                  + ", ".join(f"{k} P_L {v:.3f} in {lift['mean_plan_s'][k]:.3f} s" for k, v in lift["mean_p_l"].items())
                  + f"; gp-gpis-opt-lift / gp-p-lift: P_L {lift['p_l_ratio']:.3f}, time {lift['time_ratio']:.3f}")
+    if res.get("search_chunks"):
+        lines.append("gp-p-lift's search, ten candidates at a time against chunks sized by the budget (none here), "
+                     f"best of {CHUNK_ROUNDS} in turn, one process per scene:")
+        for r in res["search_chunks"]:
+            lines.append(f"  {r['scene']:<12} {r['tens_s']:.2f} s -> {r['chunks_s']:.2f} s ({r['speedup']:.2f}x, "
+                         f"{r['chunks']} chunks); same plan: {'yes' if r['same_plan'] else 'NO'}")
     if res.get("bandit"):
         lines += bandit_study.format_lines(res["bandit"])
     return lines
