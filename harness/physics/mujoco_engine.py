@@ -145,7 +145,9 @@ class _Slot(TrialMachine):
         self.obj, self.obj_qpos, self.obj_dof = layout.obj, layout.obj_qpos, layout.obj_dof
         # Views of the object's free joint: position and velocity (linear, angular).
         self.obj_position = d.qpos[self.obj_qpos:self.obj_qpos + 3]
+        self.obj_turn = d.qpos[self.obj_qpos + 3:self.obj_qpos + 7]
         self.obj_velocity = d.qvel[self.obj_dof:self.obj_dof + 6]
+        self.com_in_body = layout.com_in_body
         self.palm_qpos, self.finger_qpos, self.finger_dof = layout.palm_qpos, layout.finger_qpos, layout.finger_dof
         self.limits, self.jaw_geoms, self.table = layout.limits, layout.jaw_geoms, layout.table
         self.pieces, self.touching = layout.pieces, layout.touching
@@ -250,20 +252,32 @@ class _Slot(TrialMachine):
 
     def blew_up(self) -> bool:
         """With MuJoCo's automatic reset off (options_xml), a diverged state stays NaN. The
-        speed is the centre of mass's, as Bullet's base velocity is: a free joint's linear
-        velocity is its frame origin's (the polygon's origin here), to which the spin adds
-        omega x (centre of mass - origin); its angular velocity is in the body's frame."""
+        speeds are :meth:`speeds`."""
         p = self.protocol
-        self._kinematics()
-        d = self.data
-        spin = d.xmat[self.obj].reshape(3, 3) @ self.obj_velocity[3:]
-        vx, vy, vz = (self.obj_velocity[:3] + np.cross(spin, d.xipos[self.obj] - d.xpos[self.obj])).tolist()
-        wx, wy, wz = spin.tolist()
+        speed, spin = self.speeds()
         # A speed that is NaN or infinite fails these comparisons too.
-        if not (math.hypot(vx, vy, vz) <= p.max_speed and math.hypot(wx, wy, wz) <= p.max_spin):
+        if not (speed <= p.max_speed and spin <= p.max_spin):
             return True
         x, y, z = self.obj_position.tolist()
         return not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z))
+
+    def speeds(self) -> tuple[float, float]:
+        """The object's centre of mass's speed and its spin, as Bullet's base velocity
+        gives them, from the state alone (no kinematics: the check runs at every closing
+        step). A free joint's linear velocity is its frame origin's (the polygon's origin
+        here) in the world; its angular velocity w is in the body's frame, so the centre
+        of mass moves at v + R (w x c), c its place in the body's frame and R the body's
+        turn (the joint's quaternion), and the spin's size is |w|."""
+        vx, vy, vz, a, b, c = self.obj_velocity.tolist()
+        qw, qx, qy, qz = self.obj_turn.tolist()
+        cx, cy, cz = self.com_in_body
+        ux, uy, uz = b * cz - c * cy, c * cx - a * cz, a * cy - b * cx  # w x c
+        # R u for the unit quaternion (qw, q): u + 2 qw (q x u) + 2 q x (q x u).
+        tx, ty, tz = 2.0 * (qy * uz - qz * uy), 2.0 * (qz * ux - qx * uz), 2.0 * (qx * uy - qy * ux)
+        rx = ux + qw * tx + qy * tz - qz * ty
+        ry = uy + qw * ty + qz * tx - qx * tz
+        rz = uz + qw * tz + qx * ty - qy * tx
+        return math.hypot(vx + rx, vy + ry, vz + rz), math.hypot(a, b, c)
 
     def object_height_and_yaw(self) -> tuple[float, float]:
         self._kinematics()
@@ -330,6 +344,8 @@ class _Layout:
         body, jnt = m.body, m.joint
         self.obj = body("object").id
         self.palm = body("palm").id
+        # The centre of mass in the object's frame (the inertial's position).
+        self.com_in_body = tuple(float(v) for v in m.body_ipos[self.obj])
         self.obj_qpos = int(m.jnt_qposadr[jnt("object").id])
         self.obj_dof = int(m.jnt_dofadr[jnt("object").id])
         self.palm_qpos = int(m.jnt_qposadr[jnt("palm").id])
