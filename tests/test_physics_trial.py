@@ -75,6 +75,28 @@ def test_a_blown_up_simulation_is_recorded_as_unstable():
         assert runner.run([trial])[0].outcome == "unstable"
 
 
+def test_a_jaw_that_diverged_while_closing_is_unstable_not_a_missed_grasp():
+    """A NaN jaw position when the closing ends (the object's state still finite, so the
+    runaway check passes) made a NaN grip width, which passed the grip-width test and
+    ended `no_contact`; any NaN is `unstable` (docs/physics.md). MuJoCo's slot, its first
+    jaw set to NaN at the closing's last step."""
+    import harness.physics.mujoco_engine as me
+
+    trial = _rectangle_trial((-0.045, 0.0), (0.045, 0.0))
+    slot = me._Slot(me.MujocoRunner(Protocol.of("mujoco")), trial)
+    slot.tick = slot.close_steps
+    slot._after_closing_step()
+    # Finite jaws still 2 mm off the walls (the skipped travel): the grip-width test passes
+    # and the held test fails, the path a NaN width took before.
+    assert slot.result.outcome == "no_contact" and slot.result.grip_width == pytest.approx(0.064, abs=1e-6)
+    slot = me._Slot(me.MujocoRunner(Protocol.of("mujoco")), trial)
+    slot.data.qpos[slot.finger_qpos[0]] = math.nan
+    slot.tick = slot.close_steps
+    assert not slot.blew_up()
+    slot._after_closing_step()
+    assert slot.result is not None and slot.result.outcome == "unstable"
+
+
 def _pushed_distance(cone_friction: bool, angle: float, seconds: float = 0.25) -> float:
     """How far a 100 g box on the trials' table slides in ``seconds`` under a constant
     horizontal push at ``angle`` (rad) of 1.3 times its friction limit (friction as for a

@@ -372,6 +372,8 @@ class TrialMachine:
             return
         faces = [g.face_at_zero[j] + g.face_per_unit[j] * s[0] for j, s in enumerate(states)]
         self.grip_width = faces[1] - faces[0]
+        if not math.isfinite(self.grip_width):  # a jaw diverged: any NaN is a blow-up
+            return self._finish(self.failure or "unstable")
         self.closing_turn = wrap(self.object_height_and_yaw()[1] - self.start_yaw)
         self.snapshot("2-closed")
         self.grip_pose = self.relative_pose()
