@@ -128,6 +128,8 @@ def test_bench_planning_json_reports_seconds_per_estimate(monkeypatch, capsys):
     monkeypatch.setattr(harness.scene, "library_names", lambda: ["disk", "rectangle"])
     monkeypatch.setattr(planning_study, "CONVERGENCE_SEEDS", 1)
     monkeypatch.setattr(planning_study, "LIFT_SEEDS", 1)
+    monkeypatch.setattr(planning_study, "CHUNK_SCENES", ("disk",))  # gp-p-lift's search timed on one scene
+    monkeypatch.setattr(planning_study, "CHUNK_ROUNDS", 1)
     assert main(["bench", "planning", "--sizes", "20,25", "--seeds", "0", "--json"]) == 0
     result = json.loads(capsys.readouterr().out)
     assert [r["scene"] for r in result["lift_planners"]["rows"]] == ["disk", "rectangle"]
@@ -136,6 +138,9 @@ def test_bench_planning_json_reports_seconds_per_estimate(monkeypatch, capsys):
     assert [r["M"] for r in result["rows"]] == [20, 25]
     assert all(r["p_f_s"] > 0 and 0 <= r["p_f"] <= 1 for r in result["rows"])
     assert result["p_f_s_at_50"] is None and isinstance(result["p_f_growth_exponent"], float)
+    (chunks,) = result["search_chunks"]
+    assert chunks["scene"] == "disk" and chunks["same_plan"] and chunks["chunks"] == 2
+    assert chunks["speedup"] == pytest.approx(chunks["tens_s"] / chunks["chunks_s"])
 
 
 
