@@ -12,14 +12,16 @@ tracemalloc on this project's scenes (docs/experiments.md, "Memory"):
     peak = max(24 D^2,                                      fitting
                L + F,                                       grid fields
                L + W + B + 36 n M^2,                        evaluation draws
-               L + W + 12 n M^2 + n (48 M^2 + 32e3),        judging one plan
-               L + W + 12 n M^2 + S (32 M^2 + 48e3))        the largest planner
+               L + W + 12 n M^2 + n (48 M^2 + 32e3) + G,    judging one plan
+               L + W + 12 n M^2 + S (32 M^2 + 48e3) + G)    the largest planner
            + 200 MB                                         the process
 
 with F = 96 D x min(M^2, PREDICT_CHUNK) (pointwise fields) when an r^2 x r^2 matrix
 exceeds FIELDS_BASIS_MAX_BYTES, else 32 r^4 (the weight-space posterior and its
-covariance), and B = 20 r^4 when the sampler builds the weight-space posterior the
-fields did not (else 0).
+covariance), B = 20 r^4 when the sampler builds the weight-space posterior the
+fields did not (else 0), and G = harness.quality.BODY_BYTES, the group of bodies of
+samples in several pieces that judging the lift builds at once (24 MB since 2026-11-29;
+groups of 32 fields before, up to 5.6 MB at M = 50, were not counted).
 """
 
 from __future__ import annotations
@@ -108,6 +110,7 @@ def estimate(grid: int, scalars: int, rank: int, draws: int, shape_samples: int)
     """The peak (bytes) for the counts: grid size M, observed scalars D, basis rank r, n
     draws, S planner samples (the formula of the module docstring)."""
     from harness.gpis import FIELDS_BASIS_MAX_BYTES, PREDICT_CHUNK, fast_strategy
+    from harness.quality import BODY_BYTES
 
     m2, d, r4, n = float(grid) ** 2, float(scalars), float(rank) ** 4, float(draws)
     factor = 8 * d * d
@@ -119,8 +122,8 @@ def estimate(grid: int, scalars: int, rank: int, draws: int, shape_samples: int)
         "fitting the GP": 24 * d * d,
         "the grid fields": factor + fields,
         "the evaluation draws": kept - 12 * n * m2 + (20 * r4 if weight_space and pointwise else 0) + 36 * n * m2,
-        "judging a plan": kept + n * (48 * m2 + 32e3),
-        "the largest planner": kept + shape_samples * (32 * m2 + 48e3),
+        "judging a plan": kept + n * (48 * m2 + 32e3) + BODY_BYTES,
+        "the largest planner": kept + shape_samples * (32 * m2 + 48e3) + BODY_BYTES,
     }
     phase = max(phases, key=phases.get)
     return Need(phases[phase] + PROCESS_BYTES, phase, grid, scalars, rank, draws, shape_samples)
