@@ -88,12 +88,12 @@ _FRESH_PROCESS = textwrap.dedent("""
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc/self/status")
-def test_the_process_allowance_bounds_a_fresh_workers_resident_memory_within_1_2():
+def test_the_process_allowance_bounds_a_fresh_workers_resident_memory_within_1_5():
     # Measured in a new interpreter, so that nothing this test process loaded counts; its
     # peak resident memory (VmHWM) against PROCESS_BYTES (250 MiB against 280 MiB here).
     out = subprocess.run([sys.executable, "-c", _FRESH_PROCESS], capture_output=True, text=True, check=True)
     measured = int(out.stdout.split()[-1]) * 1024
-    assert measured <= memory.PROCESS_BYTES <= 1.2 * measured, measured / 1e6
+    assert measured <= memory.PROCESS_BYTES <= 1.5 * measured, measured / 1e6
 
 
 def test_the_counts_are_the_fitted_gps_own():
