@@ -593,6 +593,33 @@ def test_the_rounded_end_cases_are_capsules_of_the_bars_mass_gripped_on_or_besid
             assert edge < 0.01, edge
 
 
+def test_the_corner_cases_press_a_sharp_edge_or_a_flat_face_with_the_stated_mass():
+    """bench lift's corner cases: the same 200 g square head with a handle, turned 45
+    degrees and gripped across its side corners (each plate on a 90-degree vertical edge:
+    a line contact, whose largest lever is half the patch height, h / 2, per plate) or
+    gripped on two faces (a patch the plate's width across: its half-diagonal,
+    hypot(w / 2, h / 2)); the density gives the stated mass on each outline."""
+    from harness.bench.lift_study import CLEARANCE, CORNER_CASES, _exact_draws
+    from harness.lift import patch_height
+
+    corners, faces = CORNER_CASES
+    assert corners.corners and not faces.corners and corners.mass == faces.mass == 0.2
+    length = 0.09
+    for hang in CORNER_CASES:
+        scene = hang.scene(length)
+        half = hang.half
+        head = 2 * half * half if hang.corners else 4 * half * half  # the square's area, on its corners or faces
+        assert scene.shape.area < head + 2 * hang.half_width * (length + hang.half_width)
+        assert scene.shape.area * scene.physics.density * hang.thickness == pytest.approx(hang.mass, rel=1e-9)
+        grasp = hang.grasp(length)
+        assert grasp[1, 1] - grasp[0, 1] == pytest.approx(2 * (half + CLEARANCE))  # the head's width there
+        settings, _, draws = _exact_draws(scene, 200, 0, "corner test")
+        levers = evaluate_draws(grasp, draws, settings, lift_inputs=True).lift_inputs["largest_lever_sum"]
+        h = patch_height(settings)
+        expected = h if hang.corners else 2 * math.hypot(0.5 * settings.jaw_width, 0.5 * h)
+        assert np.nanmedian(levers) == pytest.approx(expected, rel=5e-3), (hang.label, np.nanmedian(levers), expected)
+
+
 def test_the_squeeze_cases_grip_the_bar_through_its_centre_on_its_ends_corners_or_sides():
     """bench lift's squeeze cases (docs/lift.md, "The squeeze's limit on the calibration
     rectangle"): the jaws start outside the bar on a line through its centre at each

@@ -1,7 +1,8 @@
 """The lift model against the physics (``gpis-harness bench lift``): bars gripped across
 their width at growing offsets from their centre of mass, where the analytic P_L and the
 simulated success fall through 0.5; hang bars, which the weight turns in the plates, at
-growing lengths, where success falls as their hang nears the lifted table; the
+growing lengths, where success falls as their hang nears the lifted table (and heads
+with a handle: a disk, wedges, a square gripped on its sharp corners or its faces); the
 calibration rectangle's bar gripped through its centre at 0-90 degrees to its length,
 where the plates squeeze it flush (SqueezeCase); the same bar with a V-notch in one end,
 whose walls a plate meets with its corners (NotchCase); two loads the model leaves out, at
@@ -642,6 +643,60 @@ class HangWedge(_HeadAndHandle):
         return {"type": "polygon", "exterior": [list(p) for p in outline]}, Polygon(outline)
 
 
+@dataclass(frozen=True)
+class HangHead(_HeadAndHandle):
+    """The hang test on a sharp vertical edge: a square head (half-diagonal ``half``)
+    turned 45 degrees and gripped across its two side corners, so that each plate presses
+    a 90-degree edge of the prism (a line contact over the thickness with no width, as on
+    the sharp corners of posterior samples' outlines), or, with ``corners`` False, the
+    same square (half-width ``half``) gripped on two flat faces; a handle from inside the
+    head (:class:`_HeadAndHandle`)."""
+
+    mass: float
+    friction: float
+    force: float
+    corners: bool = True
+    half: float = 0.015
+    half_width: float = 0.006
+    thickness: float = 0.03
+    name = "head"
+
+    @property
+    def label(self) -> str:
+        where = "corners" if self.corners else "faces"
+        return (f"{self.mass * 1e3:g} g square head on its {where} + handle, {self.thickness * 100:g} cm thick, "
+                f"mu {self.friction:g}, {self.force:g} N")
+
+    @property
+    def lengths(self) -> tuple:
+        return HANDLE_LENGTHS
+
+    @property
+    def neck(self) -> float:
+        return 0.5 * self.half
+
+    @property
+    def back(self) -> float:
+        return self.half
+
+    @property
+    def grip(self) -> float:
+        return self.half
+
+    def _head(self) -> tuple[dict, object]:
+        from shapely.geometry import Polygon
+
+        h = self.half
+        outline = [(h, 0.0), (0.0, h), (-h, 0.0), (0.0, -h)] if self.corners else [(-h, -h), (h, -h), (h, h), (-h, h)]
+        return {"type": "polygon", "exterior": [list(p) for p in outline]}, Polygon(outline)
+
+
+#: A sharp edge against flat faces at a weak grip (200 g, 5 N, mu 0.5; the weak regime's
+#: force): the same square head gripped on its corners and on its faces (docs/lift.md,
+#: "Sharp edges").
+CORNER_CASES = (HangHead(0.2, 0.5, 5.0, corners=True), HangHead(0.2, 0.5, 5.0, corners=False))
+
+
 #: The wedges' lengths (m): from a hang about 5.5 cm clear of the lifted table to 1.5 cm into it.
 WEDGE_LENGTHS = tuple(np.round(np.arange(0.04, 0.1101, 0.005), 3))
 #: Wedges whose inclined walls the plates press with their edges (300 g at 10 N, walls at
@@ -944,6 +999,7 @@ def benchmark(settings: Settings = Settings()) -> dict:
             "hang": hang_validate(trials=settings.trials, seed=settings.seed),
             "hang_fine": hang_validate(trials=settings.trials, seed=settings.seed, finer=HANG_FINER),
             "ends": hang_validate(END_CASES, trials=settings.trials, seed=settings.seed),
+            "corners": hang_validate(CORNER_CASES, trials=settings.trials, seed=settings.seed),
             "manifold_levers": manifold_levers(seed=settings.seed),
             "loads": load_validate(trials=settings.trials, seed=settings.seed),
             "footed": footed_validate(seed=settings.seed),
@@ -954,6 +1010,8 @@ def benchmark(settings: Settings = Settings()) -> dict:
                        "notch": validate(NOTCHES, trials=settings.trials, seed=settings.seed, engine="mujoco"),
                        "hang": hang_validate(trials=settings.trials, seed=settings.seed, engine="mujoco"),
                        "ends": hang_validate(END_CASES, trials=settings.trials, seed=settings.seed, engine="mujoco"),
+                       "corners": hang_validate(CORNER_CASES, trials=settings.trials, seed=settings.seed,
+                                                engine="mujoco"),
                        "loads": load_validate(trials=settings.trials, seed=settings.seed, engine="mujoco"),
                        "footed": footed_validate(seed=settings.seed, engine="mujoco")}}
 
@@ -968,7 +1026,7 @@ def format_lines(res: dict) -> list[str]:
         lines += _squeeze_lines(res["squeeze"])
     if "notch" in res:
         lines += _notch_lines(res["notch"])
-    for key in ("hang", "hang_fine", "ends"):
+    for key in ("hang", "hang_fine", "ends", "corners"):
         if key in res:
             lines += _hang_lines(res[key])
     m = res["manifold_levers"]
@@ -990,7 +1048,7 @@ def format_lines(res: dict) -> list[str]:
             lines += _squeeze_lines(res["mujoco"]["squeeze"])
         if "notch" in res["mujoco"]:
             lines += _notch_lines(res["mujoco"]["notch"])
-        for key in ("hang", "ends"):
+        for key in ("hang", "ends", "corners"):
             if key in res["mujoco"]:
                 lines += _hang_lines(res["mujoco"][key])
         if "loads" in res["mujoco"]:
@@ -1078,7 +1136,7 @@ def _hang_lines(res: dict) -> list[str]:
         return "-" if v is None else f"{v:.2f}"
 
     lines = [f"hang cases ({res['engine']}, step {res['time_step'] * 1e3:.3g} ms): bars (square or rounded ends), "
-             f"a disk and wedges with a handle that the weight turns, "
+             f"a disk, wedges and square heads with a handle that the weight turns, "
              f"{len(HANG_LENGTHS)} lengths ({len(HANDLE_LENGTHS)} for the handle, {len(WEDGE_LENGTHS)} for the "
              f"wedges), {res['trials_per_length']} trials each; the gap (cm) between the model's hang and the lifted "
              f"table where success and P_L fall through 0.5, and of the lengths whose hang the model calls "
