@@ -240,7 +240,9 @@ class DrawOutcomes:
 #: returns (harness.lift): the weight (N), the centre of mass's distance from the line
 #: through the contacts (m), the torque demand T under the weight alone (m, in units of
 #: the plates' friction lever), the lever sum the draw's pressure deviates give (m) and
-#: its largest value (the two half-diagonals, m), the reach beyond the contact line on the
+#: its largest value (the two half-diagonals, m), each plate's patch width along the outline
+#: (``width_1``, ``width_2``, m: 0 for a line contact, up to the plate's width on a flat
+#: face; harness.grasp.PATCH_DEPTH), the reach beyond the contact line on the
 #: centre of mass's side (m), the hang's gap to the lifted table (clearance - reach, m:
 #: positive hangs clear straight down), the friction coefficient, each plate's share of
 #: its friction carried as force at the lift's peak, u = lambda W / (2 mu N), whether a
@@ -249,8 +251,8 @@ class DrawOutcomes:
 #: object clears the table (harness.lift.clear_cosine) and cos of the turn at which an
 #: edge-pressed plate lets go of one end (harness.lift.release_cosine; 0 without an
 #: edge): lifted where the lever sum >= demand x max(clear_cos, release_cos).
-LIFT_INPUTS = ("weight", "distance", "demand", "lever_sum", "largest_lever_sum", "reach", "hang_gap", "friction",
-               "load_share", "edge", "peak_demand", "clear_cos", "release_cos")
+LIFT_INPUTS = ("weight", "distance", "demand", "lever_sum", "largest_lever_sum", "width_1", "width_2", "reach",
+               "hang_gap", "friction", "load_share", "edge", "peak_demand", "clear_cos", "release_cos")
 #: How the plates settled each draw on the table before the lift (harness.push,
 #: harness.squeeze), which ``evaluate_draws(..., lift_inputs=True)`` returns beside
 #: LIFT_INPUTS and for every draw: the push's turn of the object before the second plate
@@ -358,7 +360,7 @@ def _judge(g1, g2, field, draws: EvaluationDraws, settings: GraspSettings, lift:
     if keep:
         inputs = {name: np.full(b, np.nan) for name in LIFT_INPUTS}
         if held.any():
-            found = _lift_inputs(verdict, reach, gamma[held], settings)
+            found = _lift_inputs(verdict, settled.w1[held], settled.w2[held], reach, gamma[held], settings)
             for name in LIFT_INPUTS:
                 inputs[name][held] = found[name]
         if lift:
@@ -382,17 +384,18 @@ def _settle_inputs(contacts: Contacts, closure, settled, pushed) -> dict:
             "slide": settled.shift.copy(), "settled": code}
 
 
-def _lift_inputs(verdict, reach, friction, settings: GraspSettings) -> dict:
+def _lift_inputs(verdict, w1, w2, reach, friction, settings: GraspSettings) -> dict:
     """The lift model's quantities (:data:`LIFT_INPUTS`) of draws in force closure: the
-    verdict's own (harness.lift.LiftVerdict), the reach, its gap to the lifted table, the
-    friction and the load share."""
+    verdict's own (harness.lift.LiftVerdict), the plates' patch widths w1 and w2, the
+    reach, its gap to the lifted table, the friction and the load share."""
     from harness.lift import clearance
 
     reach, friction = np.asarray(reach, dtype=float), np.asarray(friction, dtype=float)
     with np.errstate(divide="ignore"):  # frictionless jaws: an infinite share
         share = settings.load_factor * verdict.weight / (2.0 * friction * settings.force)
     return {"weight": verdict.weight, "distance": verdict.distance, "demand": verdict.demand,
-            "lever_sum": verdict.lever, "largest_lever_sum": verdict.largest_lever, "reach": reach,
+            "lever_sum": verdict.lever, "largest_lever_sum": verdict.largest_lever,
+            "width_1": np.asarray(w1, dtype=float), "width_2": np.asarray(w2, dtype=float), "reach": reach,
             "hang_gap": clearance(settings) - reach, "friction": friction,
             "load_share": share,
             "edge": verdict.edge.astype(float), "peak_demand": verdict.peak_demand, "clear_cos": verdict.clear_cos,

@@ -596,10 +596,12 @@ def test_the_rounded_end_cases_are_capsules_of_the_bars_mass_gripped_on_or_besid
 def test_the_corner_cases_press_a_sharp_edge_or_a_flat_face_with_the_stated_mass():
     """bench lift's corner cases: the same 200 g square head with a handle, turned 45
     degrees and gripped across its side corners (each plate on a 90-degree vertical edge:
-    a line contact, whose largest lever is half the patch height, h / 2, per plate) or
-    gripped on two faces (a patch the plate's width across: its half-diagonal,
-    hypot(w / 2, h / 2)); the density gives the stated mass on each outline."""
+    a line contact, no patch width, whose largest lever is half the patch height, h / 2,
+    per plate) or gripped on two faces (a patch the plate's width across: its
+    half-diagonal, hypot(w / 2, h / 2)); the density gives the stated mass on each
+    outline; the widths `report --draws` writes give the largest levers."""
     from harness.bench.lift_study import CLEARANCE, CORNER_CASES, _exact_draws
+    from harness.grasp import PLATE_LINES
     from harness.lift import patch_height
 
     corners, faces = CORNER_CASES
@@ -614,10 +616,23 @@ def test_the_corner_cases_press_a_sharp_edge_or_a_flat_face_with_the_stated_mass
         grasp = hang.grasp(length)
         assert grasp[1, 1] - grasp[0, 1] == pytest.approx(2 * (half + CLEARANCE))  # the head's width there
         settings, _, draws = _exact_draws(scene, 200, 0, "corner test")
-        levers = evaluate_draws(grasp, draws, settings, lift_inputs=True).lift_inputs["largest_lever_sum"]
+        inputs = evaluate_draws(grasp, draws, settings, lift_inputs=True).lift_inputs
         h = patch_height(settings)
         expected = h if hang.corners else 2 * math.hypot(0.5 * settings.jaw_width, 0.5 * h)
+        levers = inputs["largest_lever_sum"]
         assert np.nanmedian(levers) == pytest.approx(expected, rel=5e-3), (hang.label, np.nanmedian(levers), expected)
+        # The patch widths `report --draws` writes, counted in the plate lines' spacing: at most
+        # one spacing on an edge (the 5 mm cells round its corner; 3 plates of 400 measured
+        # two), the plate's width on a face.
+        widths = np.concatenate([inputs["width_1"].ravel(), inputs["width_2"].ravel()])
+        spacing = settings.jaw_width / (PLATE_LINES - 1)
+        if hang.corners:
+            assert np.nanquantile(widths, 0.98) <= spacing + 1e-12, hang.label
+        else:
+            assert np.nanmedian(widths) == pytest.approx(settings.jaw_width, rel=1e-9), hang.label
+        lever_of = np.hypot(0.5 * inputs["width_1"], 0.5 * h) + np.hypot(0.5 * inputs["width_2"], 0.5 * h)
+        found = np.isfinite(levers)
+        np.testing.assert_allclose(levers[found], lever_of[found], rtol=1e-12)
 
 
 def test_the_squeeze_cases_grip_the_bar_through_its_centre_on_its_ends_corners_or_sides():
