@@ -594,31 +594,49 @@ def test_the_rounded_end_cases_are_capsules_of_the_bars_mass_gripped_on_or_besid
 
 
 def test_the_corner_cases_press_a_sharp_edge_or_a_flat_face_with_the_stated_mass():
-    """bench lift's corner cases: the same 200 g square head with a handle, turned 45
-    degrees and gripped across its side corners (each plate on a 90-degree vertical edge:
-    a line contact, no patch width, whose largest lever is half the patch height, h / 2,
-    per plate) or gripped on two faces (a patch the plate's width across: its
-    half-diagonal, hypot(w / 2, h / 2)); the density gives the stated mass on each
-    outline; the widths `report --draws` writes give the largest levers."""
+    """bench lift's corner cases: 200 g regular polygon heads with a handle, gripped across
+    two opposite vertices (a vertex on the grasp axis, its faces meeting at (n - 2) 180 / n
+    degrees) or the square across two faces; each head's area is the regular polygon's and
+    the density gives the stated mass. On the square's 90-degree edges each plate meets a
+    line contact (no patch width; its largest lever half the patch height, h / 2), on its
+    faces a patch the plate's width across (its half-diagonal, hypot(w / 2, h / 2)); the
+    widths `report --draws` writes give the largest levers."""
     from harness.bench.lift_study import CLEARANCE, CORNER_CASES, _exact_draws
     from harness.grasp import PLATE_LINES
     from harness.lift import patch_height
 
-    corners, faces = CORNER_CASES
-    assert corners.corners and not faces.corners and corners.mass == faces.mass == 0.2
+    corners, faces = CORNER_CASES[0], CORNER_CASES[-1]
+    assert corners.vertex and corners.sides == 4 and not faces.vertex and faces.sides == 4
+    assert {h.mass for h in CORNER_CASES} == {0.2}
     length = 0.09
     for hang in CORNER_CASES:
         scene = hang.scene(length)
         half = hang.half
-        head = 2 * half * half if hang.corners else 4 * half * half  # the square's area, on its corners or faces
-        assert scene.shape.area < head + 2 * hang.half_width * (length + hang.half_width)
+        outline = np.array(hang._head()[1].exterior.coords)[:-1]
+        if hang.vertex:  # a vertex at +-half on the grasp axis, its faces meeting at (n - 2) 180 / n degrees
+            top = outline[np.argmax(outline[:, 1])]
+            assert top == pytest.approx([0.0, half], abs=1e-12)
+            k = int(np.argmax(outline[:, 1]))
+            a, b = outline[k - 1] - top, outline[(k + 1) % len(outline)] - top
+            angle = math.degrees(math.acos(a @ b / (np.linalg.norm(a) * np.linalg.norm(b))))
+            assert angle == pytest.approx(180.0 - 360.0 / hang.sides, abs=1e-9)
+        else:  # a face at +-half, normal to the grasp axis
+            assert np.sort(outline[:, 1])[-2:] == pytest.approx([half, half], abs=1e-12)
+        assert hang._head()[1].area == pytest.approx(0.5 * hang.sides * (half if hang.vertex else half / math.cos(
+            math.pi / hang.sides)) ** 2 * math.sin(2 * math.pi / hang.sides))  # a regular n-gon's area
         assert scene.shape.area * scene.physics.density * hang.thickness == pytest.approx(hang.mass, rel=1e-9)
         grasp = hang.grasp(length)
         assert grasp[1, 1] - grasp[0, 1] == pytest.approx(2 * (half + CLEARANCE))  # the head's width there
+    # The analytic side on the square's edges and faces (the 5 mm cells round the hexagon's
+    # and the octagon's blunter vertices into 2.5-5 mm patches: the engines meet their true
+    # outlines, the model the grid's).
+    for hang in (corners, faces):
+        scene = hang.scene(length)
+        grasp = hang.grasp(length)
         settings, _, draws = _exact_draws(scene, 200, 0, "corner test")
         inputs = evaluate_draws(grasp, draws, settings, lift_inputs=True).lift_inputs
         h = patch_height(settings)
-        expected = h if hang.corners else 2 * math.hypot(0.5 * settings.jaw_width, 0.5 * h)
+        expected = h if hang.vertex else 2 * math.hypot(0.5 * settings.jaw_width, 0.5 * h)
         levers = inputs["largest_lever_sum"]
         assert np.nanmedian(levers) == pytest.approx(expected, rel=5e-3), (hang.label, np.nanmedian(levers), expected)
         # The patch widths `report --draws` writes, counted in the plate lines' spacing: at most
@@ -626,7 +644,7 @@ def test_the_corner_cases_press_a_sharp_edge_or_a_flat_face_with_the_stated_mass
         # two), the plate's width on a face.
         widths = np.concatenate([inputs["width_1"].ravel(), inputs["width_2"].ravel()])
         spacing = settings.jaw_width / (PLATE_LINES - 1)
-        if hang.corners:
+        if hang.vertex:
             assert np.nanquantile(widths, 0.98) <= spacing + 1e-12, hang.label
         else:
             assert np.nanmedian(widths) == pytest.approx(settings.jaw_width, rel=1e-9), hang.label

@@ -645,17 +645,19 @@ class HangWedge(_HeadAndHandle):
 
 @dataclass(frozen=True)
 class HangHead(_HeadAndHandle):
-    """The hang test on a sharp vertical edge: a square head (half-diagonal ``half``)
-    turned 45 degrees and gripped across its two side corners, so that each plate presses
-    a 90-degree edge of the prism (a line contact over the thickness with no width, as on
-    the sharp corners of posterior samples' outlines), or, with ``corners`` False, the
-    same square (half-width ``half``) gripped on two flat faces; a handle from inside the
-    head (:class:`_HeadAndHandle`)."""
+    """The hang test on a vertex: a regular polygon head of ``sides`` sides (even) gripped
+    across two opposite vertices, so that each plate presses a vertical edge of the prism
+    whose faces meet at (sides - 2) 180 / sides degrees (a line contact over the thickness
+    with no width, as on the corners of posterior samples' outlines; ``half`` the
+    vertices' radius), or, with ``vertex`` False, across two opposite faces (``half`` the
+    faces' distance from the centre); a handle from inside the head
+    (:class:`_HeadAndHandle`)."""
 
     mass: float
     friction: float
     force: float
-    corners: bool = True
+    sides: int = 4
+    vertex: bool = True
     half: float = 0.015
     half_width: float = 0.006
     thickness: float = 0.03
@@ -663,9 +665,9 @@ class HangHead(_HeadAndHandle):
 
     @property
     def label(self) -> str:
-        where = "corners" if self.corners else "faces"
-        return (f"{self.mass * 1e3:g} g square head on its {where} + handle, {self.thickness * 100:g} cm thick, "
-                f"mu {self.friction:g}, {self.force:g} N")
+        where = f"vertices ({180 - 360 / self.sides:g} deg)" if self.vertex else "faces"
+        return (f"{self.mass * 1e3:g} g {self.sides}-gon head on its {where} + handle, "
+                f"{self.thickness * 100:g} cm thick, mu {self.friction:g}, {self.force:g} N")
 
     @property
     def lengths(self) -> tuple:
@@ -686,15 +688,18 @@ class HangHead(_HeadAndHandle):
     def _head(self) -> tuple[dict, object]:
         from shapely.geometry import Polygon
 
-        h = self.half
-        outline = [(h, 0.0), (0.0, h), (-h, 0.0), (0.0, -h)] if self.corners else [(-h, -h), (h, -h), (h, h), (-h, h)]
+        n = self.sides
+        # Vertices at +-y (vertex) or faces normal to y (the vertices half a side further round).
+        turn, radius = (0.0, self.half) if self.vertex else (math.pi / n, self.half / math.cos(math.pi / n))
+        angles = 0.5 * math.pi + turn + 2.0 * math.pi * np.arange(n) / n
+        outline = [(float(radius * math.cos(a)), float(radius * math.sin(a))) for a in angles]
         return {"type": "polygon", "exterior": [list(p) for p in outline]}, Polygon(outline)
 
 
-#: A sharp edge against flat faces at a weak grip (200 g, 5 N, mu 0.5; the weak regime's
-#: force): the same square head gripped on its corners and on its faces (docs/lift.md,
-#: "Sharp edges").
-CORNER_CASES = (HangHead(0.2, 0.5, 5.0, corners=True), HangHead(0.2, 0.5, 5.0, corners=False))
+#: Vertices against faces at a weak grip (200 g, 5 N, mu 0.5; the weak regime's force): a
+#: square, a hexagon and an octagon gripped across their vertices (90, 120 and 135 degrees)
+#: and the square across its faces (docs/lift.md, "Sharp edges").
+CORNER_CASES = (*(HangHead(0.2, 0.5, 5.0, sides) for sides in (4, 6, 8)), HangHead(0.2, 0.5, 5.0, 4, vertex=False))
 
 
 #: The wedges' lengths (m): from a hang about 5.5 cm clear of the lifted table to 1.5 cm into it.
