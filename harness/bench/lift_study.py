@@ -2,7 +2,7 @@
 their width at growing offsets from their centre of mass, where the analytic P_L and the
 simulated success fall through 0.5; hang bars, which the weight turns in the plates, at
 growing lengths, where success falls as their hang nears the lifted table (and heads
-with a handle: a disk, wedges, a square gripped on its sharp corners or its faces); the
+with a handle: a disk, wedges, regular polygons gripped on their vertices or faces); the
 calibration rectangle's bar gripped through its centre at 0-90 degrees to its length,
 where the plates squeeze it flush (SqueezeCase); the same bar with a V-notch in one end,
 whose walls a plate meets with its corners (NotchCase); two loads the model leaves out, at
@@ -1141,7 +1141,7 @@ def _hang_lines(res: dict) -> list[str]:
         return "-" if v is None else f"{v:.2f}"
 
     lines = [f"hang cases ({res['engine']}, step {res['time_step'] * 1e3:.3g} ms): bars (square or rounded ends), "
-             f"a disk, wedges and square heads with a handle that the weight turns, "
+             f"a disk, wedges and polygon heads with a handle that the weight turns, "
              f"{len(HANG_LENGTHS)} lengths ({len(HANDLE_LENGTHS)} for the handle, {len(WEDGE_LENGTHS)} for the "
              f"wedges), {res['trials_per_length']} trials each; the gap (cm) between the model's hang and the lifted "
              f"table where success and P_L fall through 0.5, and of the lengths whose hang the model calls "
