@@ -1142,11 +1142,11 @@ def _hang_lines(res: dict) -> list[str]:
 
     lines = [f"hang cases ({res['engine']}, step {res['time_step'] * 1e3:.3g} ms): bars (square or rounded ends), "
              f"a disk, wedges and polygon heads with a handle that the weight turns, "
-             f"{len(HANG_LENGTHS)} lengths ({len(HANDLE_LENGTHS)} for the handle, {len(WEDGE_LENGTHS)} for the "
-             f"wedges), {res['trials_per_length']} trials each; the gap (cm) between the model's hang and the lifted "
-             f"table where success and P_L fall through 0.5, and of the lengths whose hang the model calls "
-             f"{CLEAR_GAP * 100:g} cm clear or more: the success, the mean P_L and the success of the trials "
-             f"that turned (how many turned)",
+             f"{len(HANG_LENGTHS)} lengths ({len(HANDLE_LENGTHS)} for the handle and the heads, "
+             f"{len(WEDGE_LENGTHS)} for the wedges), {res['trials_per_length']} trials each; the gap (cm) "
+             f"between the model's hang and the lifted table where success and P_L fall through 0.5, and of "
+             f"the lengths whose hang the model calls {CLEAR_GAP * 100:g} cm clear or more: the success, the "
+             f"mean P_L and the success of the trials that turned (how many turned)",
              f"{'case':<70} {'P_L':>6} {'success':>8} {'diff':>6}  {'clear':>5}  {'P_L':>5}  {'turned':>10}  "
              f"failures"]
     for r in res["rows"]:
