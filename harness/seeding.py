@@ -19,6 +19,16 @@ def stream(seed: int, *keys: str | int) -> np.random.Generator:
 
     Keys are hashed stably (not with Python's salted ``hash``), so the same names give
     the same numbers in every process and on every machine.
+
+    numpy's SeedSequence reads the keys as one run of 32-bit words, with no separator
+    and with trailing zero words ignored: a name counts as the two words of its 64-bit
+    hash, an integer of 2**32 or more as two words, and ``stream(s, "x", 0)`` is
+    ``stream(s, "x")``. Every stream of an experiment ends with a name (its purpose), and
+    the integers inside are small (realisations), so no two of them coincide unless two
+    names' 64-bit hashes do; three benchmark streams end with an index (bench sampling's
+    and bench planning's repetitions, the convergence study's initialisations), and none
+    of those is also used without it. A new stream should end with a name. (A change to
+    the encoding would move every result, the reference run's included, so it stays.)
     """
     entropy = [_key_int(seed)] + [_key_int(k) for k in keys]
     return np.random.default_rng(np.random.SeedSequence(entropy))
