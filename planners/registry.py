@@ -85,6 +85,11 @@ def planner_class(name: str) -> type:
     found, broken = available()
     if name not in found:
         extra = f"; {name} failed to load: {broken[name]}" if name in broken else ""
+        base = name.removesuffix("-lift")
+        if base != name and base in found:  # make eval's labels are not planner names
+            extra += (f"; '{name}' is make eval's label for planner '{base}' planning for the lift: in a "
+                      f"config name = \"{base}\" with params = {{ quality = \"lift\" }}, on the command line "
+                      f"--planner {base} --param quality=lift")
         raise InputError("--planner", None, f"unknown planner '{name}' (known: {', '.join(sorted(found))}){extra}")
     return found[name]
 

@@ -376,6 +376,24 @@ def _one_line(capsys) -> str:
     return err.strip()
 
 
+def test_make_evals_lift_labels_are_named_as_what_they_are(tmp_path, capsys):
+    """'gp-gpis-opt-lift' is a label of experiments/default.toml, not a planner: asked for
+    as one (on the command line or in a config), the one line says how to write it; a
+    '-lift' name whose base is not a planner gets no such hint."""
+    from harness.cli import main
+
+    assert main(["plan", "disk", "--planner", "gp-gpis-opt-lift"]) == 2
+    err = _one_line(capsys)
+    assert "unknown planner 'gp-gpis-opt-lift'" in err and "--planner gp-gpis-opt --param quality=lift" in err
+    config = tmp_path / "lift.toml"
+    config.write_text('name = "x"\nscenes = ["disk"]\n[[planners]]\nname = "mean-shape-lift"\n')
+    assert main(["eval", str(config), "--out", str(tmp_path / "out")]) == 2
+    err = _one_line(capsys)
+    assert "planners[0].name" in err and 'name = "mean-shape" with params = { quality = "lift" }' in err
+    assert main(["plan", "disk", "--planner", "nothing-lift"]) == 2
+    assert "quality" not in _one_line(capsys)
+
+
 @pytest.mark.parametrize("name, message", UNLOADABLE)
 def test_a_planner_that_cannot_be_loaded_or_made_stops_plan_with_one_line(tmp_path, monkeypatch, capsys, name,
                                                                           message):
