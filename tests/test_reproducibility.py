@@ -131,8 +131,9 @@ def test_the_streams_keys_encode_as_harness_seeding_says():
     """harness.seeding.stream's documented encoding, pinned so that the docstring's
     warning stays true: keys are one run of 32-bit words (a name is the two words of its
     hash; an integer of 2**32 or more is two words) and trailing zero words are ignored;
-    a name last keeps a stream apart from its prefix, and the experiment's key patterns
-    for one cell give distinct streams."""
+    a name last keeps a stream apart from its prefix, and the key patterns one cell of an
+    experiment uses today (written out here, so a new purpose elsewhere is not seen)
+    give distinct streams."""
     from harness.seeding import _key_int
 
     h = _key_int("tape")
