@@ -131,9 +131,10 @@ def test_the_streams_keys_encode_as_harness_seeding_says():
     """harness.seeding.stream's documented encoding, pinned so that the docstring's
     warning stays true: keys are one run of 32-bit words (a name is the two words of its
     hash; an integer of 2**32 or more is two words) and trailing zero words are ignored;
-    a name last keeps a stream apart from its prefix, and the key patterns one cell of an
-    experiment uses today (written out here, so a new purpose elsewhere is not seen)
-    give distinct streams."""
+    a name last keeps a stream apart from its prefix, and the streams one cell of an
+    experiment uses today give distinct numbers (the evaluation's from
+    harness.quality.default_streams; the pipeline's keys, inline there, written out here,
+    so a new purpose added to the pipeline is not seen)."""
     from harness.seeding import _key_int
 
     h = _key_int("tape")
