@@ -81,20 +81,47 @@ def test_the_summary_pools_p_l_over_the_plans_draws(run):
         assert row.p_l_ci_low < row.p_l < row.p_l_ci_high
 
 
-def test_calibration_gives_brier_and_spearman_per_metric_as_computed_directly(run):
-    table, bins = calibration(run)
-    assert set(table.metric) == {"p_f", "p_l"} and set(bins.metric) == {"p_f", "p_l"}
-    post = run["trials"][run["trials"].shapes == "posterior"]
-    joined = post.merge(run["analytic"], on=["scene", "realisation", "planner"])
-    won = (joined.outcome == "success").astype(float)
-    rate = joined.assign(s=won).groupby(["scene", "realisation", "planner"]).agg(s=("s", "mean"), p_f=("p_f", "first"),
-                                                                                 p_l=("p_l", "first"))
+def test_a_plan_that_failed_counts_as_p_f_and_p_l_zero_over_the_configs_draws(run):
+    """A planner that returned no grasp (executed 0, no analytic row, no trials) still counts
+    in its pooled P_F and P_L, at 0 over the experiment's analytic draws, so a planner
+    that fails often is not ranked on its successes alone."""
+    key = ("beta", 1, "gp-p")
+    at = lambda frame: (frame.scene == key[0]) & (frame.realisation == key[1]) & (frame.planner == key[2])  # noqa: E731
+    plans = run["plans"].copy()
+    plans.loc[at(plans), "executed"] = 0
+    failed = {**run, "plans": plans, "analytic": run["analytic"][~at(run["analytic"])],
+              "trials": run["trials"][~at(run["trials"])]}
+    row = summary(failed)
+    row = row[(row.scene == "all") & (row.planner == "gp-p")].iloc[0]
+    mine = failed["analytic"][failed["analytic"].planner == "gp-p"]
     for metric in ("p_f", "p_l"):
-        row = table[(table.metric == metric) & (table.planner == "all")].iloc[0]
-        assert row.brier == pytest.approx(((joined[metric] - won) ** 2).mean(), abs=1e-12)
-        assert row.spearman == pytest.approx(stats.spearmanr(rate[metric], rate.s).statistic, abs=1e-12)
-    p_l, p_f = (table[(table.metric == m) & (table.planner == "all")].iloc[0] for m in ("p_l", "p_f"))
-    assert p_l.spearman > 0.8 and p_l.brier < p_f.brier  # the synthetic success follows P_L, not P_F
+        expected = (mine[metric] * DRAWS).round().sum() / (DRAWS * (len(mine) + 1))  # each plan k of DRAWS
+        assert row[metric] == pytest.approx(expected, abs=1e-12)
+    assert row.plans_ok == f"{len(mine)}/{len(mine) + 1}" and not row.complete
+
+
+def test_calibration_gives_brier_and_spearman_per_metric_as_computed_directly(run):
+    """Over trials (the Brier score, the success rate) and over plans (Spearman), computed
+    directly; also with plans of unequal trial counts (a run stopped part way), where the
+    success pooled over trials is not the mean of the plans' rates."""
+    uneven = run["trials"]
+    uneven = uneven[~((uneven.realisation == 0) & (uneven.shapes == "posterior") & (uneven.trial >= 10))]
+    for data in (run, {**run, "trials": uneven}):
+        table, bins = calibration(data)
+        assert set(table.metric) == {"p_f", "p_l"} and set(bins.metric) == {"p_f", "p_l"}
+        post = data["trials"][data["trials"].shapes == "posterior"]
+        joined = post.merge(data["analytic"], on=["scene", "realisation", "planner"])
+        won = (joined.outcome == "success").astype(float)
+        rate = joined.assign(s=won).groupby(["scene", "realisation", "planner"]).agg(
+            s=("s", "mean"), p_f=("p_f", "first"), p_l=("p_l", "first"))
+        for metric in ("p_f", "p_l"):
+            row = table[(table.metric == metric) & (table.planner == "all")].iloc[0]
+            assert row.brier == pytest.approx(((joined[metric] - won) ** 2).mean(), abs=1e-12)
+            assert row.spearman == pytest.approx(stats.spearmanr(rate[metric], rate.s).statistic, abs=1e-12)
+            assert row.success_rate == pytest.approx(won.mean(), abs=1e-12)
+        p_l, p_f = (table[(table.metric == m) & (table.planner == "all")].iloc[0] for m in ("p_l", "p_f"))
+        assert p_l.spearman > 0.8 and p_l.brier < p_f.brier  # the synthetic success follows P_L, not P_F
+    assert abs(won.mean() - rate.s.mean()) > 1e-3  # the uneven run tells the two rates apart
 
 
 def test_the_verdicts_of_the_draws_meet_their_trials_outcomes(run):
