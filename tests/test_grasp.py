@@ -13,7 +13,8 @@ from scipy.optimize import linprog
 from harness.belief import build_belief
 from harness.geometry import Grid
 from harness.grasp import (DEGENERATE, MISSED, OK, PATCH_DEPTH, PLATE_LINES, TOO_WIDE, Grasp, SDFBatch,
-                           contact_wrenches, edge_contacts, ferrari_canny, find_contacts, force_closure, plate_closure)
+                           contact_wrenches, edge_contacts, edge_slopes, ferrari_canny, find_contacts, force_closure,
+                           plate_closure)
 from harness.scene import load_scene
 from harness.seeding import stream
 
@@ -515,6 +516,8 @@ def test_edge_contacts_follow_the_walls_profile_across_the_plate():
         "inclined, from line 0": (slope * s, 0, True),
         "inclined, from the last line": (slope * s[::-1], PLATE_LINES - 1, True),
         "barely inclined (within PATCH_DEPTH over the plate)": (0.5 * slope * s, 0, False),
+        "inclined just past PATCH_DEPTH over the plate": (1.05 / 1.5 * slope * s, 0, True),
+        "inclined just within it": (0.95 / 1.5 * slope * s, 0, False),
         "flat": (np.zeros(PLATE_LINES), 0, False),
         "curved, vertex 1 mm beyond the edge": (curve * ((s + 0.001) ** 2 - 0.001 ** 2), 0, True),
         "curved, vertex 1 mm inside the plate": (curve * ((s - 0.001) ** 2 - 0.001 ** 2) + curve * 0.001 ** 2, 0,
@@ -527,6 +530,13 @@ def test_edge_contacts_follow_the_walls_profile_across_the_plate():
     first = np.array([first for _, first, _ in rows.values()])
     expected = [e for _, _, e in rows.values()]
     assert edge_contacts(depth, first).tolist() == expected
+    # The slope at the edge is the profile's own derivative there: exact for a plane and a
+    # quadratic (a circle's profile, 2 (1 mm) / (2 r) at 1 mm from its vertex), 0 off an edge.
+    own = {"curved, vertex 1 mm beyond the edge": 2 * curve * 0.001,
+           "inclined just past PATCH_DEPTH over the plate": 1.05 / 1.5 * slope}
+    for name, value in zip(rows, edge_slopes(depth, first, spacing)):
+        want = own.get(name, slope if rows[name][2] else 0.0)
+        assert value == pytest.approx(want, rel=1e-9, abs=1e-12), name
 
 
 def _half_planes(grid, planes):
