@@ -461,3 +461,54 @@ def test_a_slide_that_runs_another_wall_into_a_plates_side_is_held_where_it_stop
         assert not on.squeezed[0] and on.shift[0] == 0.0
     assert find_contacts(plain, *at(0.024), JAW).status[0] == OK
     assert find_contacts(plain, *at(0.026), JAW).status[0] != OK
+
+
+def test_a_turn_that_runs_another_wall_into_a_plates_side_is_held_at_the_step_before():
+    """A 6 x 2 cm bar gripped through its centre with the closing line 12 degrees off its
+    faces' normal, at mu = 0.1: the plates touch the faces with their edges, and the
+    squeeze turns the bar until they lie within the cone (closure at 8 degrees, 4 off
+    flush). With a tooth standing 8 mm above the upper face at x = -7 to -4 mm, the upper
+    plate's strip sweeps towards it as the bar turns: at the step where the plate's search,
+    from SQUEEZE_MARGIN outside its last contact, starts inside the tooth, the tooth runs
+    into the plate's side. The turn is then held in the plane at the step before, with
+    that step's contacts (checked against the turned grasps judged one by one)."""
+    from harness.grasp import OK, TOO_WIDE, turn_about
+    from harness.squeeze import SQUEEZE_MARGIN, _couple, _pushes
+
+    mu = 0.1
+
+    def fields(outline):
+        shape = shapely.Polygon(outline)
+        return SDFBatch(GRID, grid_sdf(shape, GRID)[None], grid_sdf_gradient(shape, GRID)[None]), shape
+
+    bar = [(-0.03, -0.01), (0.03, -0.01), (0.03, 0.01), (-0.03, 0.01)]
+    toothed = [*bar[:3], (-0.004, 0.01), (-0.004, 0.018), (-0.007, 0.018), (-0.007, 0.01), bar[3]]
+    g1, g2 = jaws(math.radians(12.0))
+    plain, shape = fields(bar)
+    contacts = find_contacts(plain, g1, g2, JAW)
+    closed, _ = plate_closure(contacts, mu, np.zeros(2), 0.05)
+    out = squeeze(plain, g1, g2, 0, contacts, closed, mu, JAW, 0.05, slide_limit=0.0)
+    assert not closed[0] and out.squeezed[0] and out.turn[0] == pytest.approx(math.radians(8.0), abs=1e-9)
+
+    tooth, shape = fields(toothed)
+    com = np.array(shape.centroid.coords[0])
+    contacts = find_contacts(tooth, g1, g2, JAW)
+    closed, _ = plate_closure(contacts, mu, com, 0.05)
+    sense = _couple(*_pushes(contacts), g1, g2)[0]
+    last, held = contacts, None
+    for k in range(1, int(round(SQUEEZE_LIMIT / SQUEEZE_STEP)) + 1):
+        h1, h2 = (turn_about(g, com[None], -sense * k * SQUEEZE_STEP) for g in (g1, g2))
+        u = (h2 - h1)[0] / np.linalg.norm(h2 - h1)
+        t1, t2 = (last.c1[0] - h1[0]) @ u - SQUEEZE_MARGIN, (last.c2[0] - h1[0]) @ u + SQUEEZE_MARGIN
+        probe = find_contacts(tooth, h1 + t1 * u, h1 + t2 * u, JAW)
+        if probe.status[0] == TOO_WIDE:
+            held = (k - 1) * SQUEEZE_STEP
+            break
+        assert probe.status[0] == OK and not plate_closure(probe, mu, com, 0.05)[0][0]
+        last = probe
+    assert held == pytest.approx(math.radians(6.0), abs=1e-9)
+    out = squeeze(tooth, g1, g2, 0, contacts, closed, mu, JAW, 0.05, slide_limit=0.0)
+    assert not closed[0] and out.squeezed[0]
+    assert out.turn[0] == pytest.approx(held, abs=1e-9)
+    np.testing.assert_allclose(out.c1[0], last.c1[0], atol=1e-9)
+    np.testing.assert_allclose(out.c2[0], last.c2[0], atol=1e-9)
