@@ -83,3 +83,42 @@ def test_bounds_hold_at_every_iterate():
     # Finite differences step 1e-6 outside an iterate; iterates themselves stay inside.
     points = np.concatenate(seen)
     assert points[:, 0].min() >= -1.5 - 2e-6 and points[:, 1].max() <= 1.5 + 2e-6
+
+
+def test_the_damped_bfgs_update_keeps_the_model_positive_definite_and_meets_powells_secant():
+    """Powell's damping (Nocedal and Wright, Numerical Optimization, Procedure 18.2) against
+    its formula: with enough curvature along the step (s.y >= 0.2 s.B s) the update is plain
+    BFGS and meets the secant equation B+ s = y; along a step of negative curvature, where
+    plain BFGS would lose positive definiteness, it meets B+ s = r with r = theta y + (1 -
+    theta) B s, theta = 0.8 s.B s / (s.B s - s.y), and stays positive definite."""
+    from harness.scp import _damped_bfgs
+
+    rng = np.random.default_rng(3)
+    a = rng.standard_normal((4, 4))
+    b = a @ a.T + 4 * np.eye(4)
+    s = rng.standard_normal(4)
+    bs = b @ s
+    for y, damped in ((b @ s + 0.1 * rng.standard_normal(4), False), (-0.5 * bs, True)):
+        new = _damped_bfgs(b[None], s[None], y[None], np.array([False]))[0]
+        sy, sbs = s @ y, s @ bs
+        theta = 0.8 * sbs / (sbs - sy) if damped else 1.0
+        assert (sy < 0.2 * sbs) == damped
+        np.testing.assert_allclose(new @ s, theta * y + (1 - theta) * bs, rtol=1e-10, atol=1e-12)
+        np.testing.assert_allclose(new, new.T, atol=1e-12)
+        assert np.linalg.eigvalsh(new).min() > 0
+
+
+def test_an_unconstrained_descent_never_accepts_a_step_that_raises_the_objective():
+    """Rosenbrock's valley from the standard start (-1.2, 1): the minimum (1, 1), and with no
+    constraints the merit is the objective, which the trust region's ratio test keeps from
+    rising at any iteration (accepting every step the model promises would raise it by
+    about 1600 on the way)."""
+    def rosenbrock(x):
+        empty = np.zeros((len(x), 0))
+        return 100 * (x[:, 1] - x[:, 0] ** 2) ** 2 + (1 - x[:, 0]) ** 2, empty, empty
+
+    result = minimize(rosenbrock, np.array([[-1.2, 1.0]]), -10.0, 10.0, 0, 0)
+    assert result.status == ["converged"]
+    np.testing.assert_allclose(result.x[0], [1.0, 1.0], atol=1e-4)
+    objective = np.array([step[2][0] for step in result.trace])
+    assert np.all(np.diff(objective) <= 0.0)
