@@ -362,3 +362,20 @@ def test_a_gpis_without_gradient_observations_samples_its_posterior(data, method
     xs = np.linspace(-0.05, 0.05, 9)
     grid_values, grid_grads = gp.sample_grid(xs, xs, 50, np.random.default_rng(18), method=method)
     assert grid_values.shape == (50, 9, 9) and np.isfinite(grid_grads).all()
+
+
+def test_a_gradient_with_one_unknown_component_is_not_observed(data):
+    """A gradient row with NaN in one component counts as no gradient at that point (not
+    as half of one): the posterior is the one without that row's gradient."""
+    X, values, noise, grads, gnoise = data
+    partial, none = grads.copy(), grads.copy()
+    partial[1, 0] = np.nan
+    none[1] = np.nan
+    assert np.isfinite(grads[1]).all()
+    P = np.random.default_rng(5).uniform(-0.05, 0.05, (20, 2))
+    a = GPIS(lengthscale=L, scale=C, prior_mean=M0).fit(X, values, noise, partial, gnoise)
+    b = GPIS(lengthscale=L, scale=C, prior_mean=M0).fit(X, values, noise, none, gnoise)
+    full = GPIS(lengthscale=L, scale=C, prior_mean=M0).fit(X, values, noise, grads, gnoise)
+    for x, y in zip(a.predict(P), b.predict(P)):
+        np.testing.assert_allclose(x, y, rtol=1e-12, atol=1e-15)
+    assert np.abs(full.predict(P)[0] - b.predict(P)[0]).max() > 1e-6  # that gradient did inform the posterior
