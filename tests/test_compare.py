@@ -36,8 +36,10 @@ def _keys():
             for shapes, n in (("posterior", POSTERIOR), ("truth", TRUTH)) for i in range(n)]
 
 
-def _write_run(folder: Path, config: dict, outcomes: list[str], moved_plan: bool = False) -> Path:
-    """A results folder whose ledger holds one experiment with these trial outcomes."""
+def _write_run(folder: Path, config: dict, outcomes: list[str], moved_plan: bool = False,
+               failed_plan: bool = False) -> Path:
+    """A results folder whose ledger holds one experiment with these trial outcomes (and,
+    with ``failed_plan``, its last plan failed: no grasp)."""
     folder.mkdir()
     plans = [{"scene": s, "realisation": r, "planner": p, "planner_name": p, "params": "{}", "status": "ok",
               "executed": 1, "message": "", "g1x": -0.03, "g1y": 0.0, "g2x": 0.03, "g2y": 0.0, "estimate": 0.5,
@@ -45,6 +47,8 @@ def _write_run(folder: Path, config: dict, outcomes: list[str], moved_plan: bool
              for s in SCENES for r in range(2) for p in PLANNERS]
     if moved_plan:
         plans[0]["g1y"] = 0.001
+    if failed_plan:
+        plans[-1].update(status="error", executed=0, g1x=math.nan, g1y=math.nan, g2x=math.nan, g2y=math.nan)
     trials = [{"scene": s, "realisation": r, "planner": p, "shapes": shapes, "trial": i, "outcome": o,
                "steps": 1, "grip_width": None, "closing_turn": None, "rise": None, "pivot": None}
               for (s, r, p, shapes, i), o in zip(_keys(), outcomes)]
@@ -106,7 +110,11 @@ def test_cells_are_the_trials_own_counts(two_runs):
     per_cell = np.array(per_cell)
     assert result["spread"]["cells"] == 8
     assert result["spread"]["rms"] == pytest.approx(np.sqrt(np.mean(per_cell ** 2)), abs=1e-12)
-    assert abs(result["spread"]["max"]) == pytest.approx(np.abs(per_cell).max(), abs=1e-12)
+    assert result["spread"]["max"] == pytest.approx(per_cell[np.argmax(np.abs(per_cell))], abs=1e-12)
+    # The largest change is the largest in size, with its sign: the same cell, negated, from B to A.
+    back = compare(dir_b, dir_a)["spread"]
+    assert (back["max"], back["max_at"]) == (pytest.approx(-result["spread"]["max"], abs=1e-12),
+                                             result["spread"]["max_at"])
     overall = cells[(cells.scene == "all") & (cells.planner == "all") & (cells.shapes == "all")].iloc[0]
     assert overall.difference == pytest.approx((b == "success").mean() - (a == "success").mean(), abs=1e-12)
     # Trials 0-3: dropped in both agrees; dropped in B only where A slipped does not.
@@ -169,6 +177,17 @@ def test_what_differs_and_which_plans_moved(two_runs):
     assert diffs["planners.mean-shape"][1]["params"] == {"candidates": 5}
 
 
+def test_a_plan_that_failed_in_both_runs_is_the_same_plan(two_runs, tmp_path):
+    """Plans are identical when their grasps and statuses are: a planner that returned no
+    grasp in both runs (NaN coordinates) planned alike; one that failed in one run only
+    did not."""
+    _, _, _, a, _ = two_runs
+    both = [_write_run(tmp_path / name, _config(), list(a), failed_plan=True) for name in ("x", "y")]
+    once = _write_run(tmp_path / "z", _config(), list(a))
+    assert compare(*both)["plans"]["gp-p"] == {"plans": 4, "identical": 4}
+    assert compare(both[0], once)["plans"]["gp-p"] == {"plans": 4, "identical": 3}
+
+
 def test_command_line_prints_the_tables_and_json(two_runs, capsys):
     dir_a, dir_b, keys, a, b = two_runs
     assert main(["compare", str(dir_a), str(dir_b)]) == 0
@@ -187,5 +206,10 @@ def test_runs_that_drew_differently_are_refused_in_one_line(two_runs, tmp_path, 
     assert main(["compare", str(dir_a), str(other)]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "config.seed" in err and "not paired" in err
+    # Other grasp settings (here the approach noise's size) execute other grasps from the same deviates.
+    other = _write_run(tmp_path / "sigma", _config(settings={"sigma_g": 0.002}), list(a))
+    assert main(["compare", str(dir_a), str(other)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "config.settings" in err and "not paired" in err
     assert main(["compare", str(dir_a), str(tmp_path / "missing")]) == 2
     assert "no such results folder" in capsys.readouterr().err

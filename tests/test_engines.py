@@ -245,6 +245,32 @@ def test_a_cross_engine_comparison_refuses_any_other_difference(tmp_path, capsys
     assert main(["compare", str(a), str(b)]) == 0  # without --engines any physics change is paired
 
 
+def test_a_cross_engine_comparison_refuses_scene_files_whose_content_differs(tmp_path, capsys):
+    """Two runs may read their scenes from different folders (the ledger pairs them by the
+    scene's name): a cross-engine comparison checks that the files say the same, by the
+    config's content hash less the engine."""
+    from test_compare import SCENES, _config, _keys, _write_run
+
+    text = (Path(__file__).parents[1] / "scenes" / "rectangle.toml").read_text()
+    folders = {}
+    for copy, noise in (("one", "0.0005"), ("same", "0.0005"), ("noisier", "0.002")):
+        folder = tmp_path / copy
+        folder.mkdir()
+        for name in SCENES:
+            edited = text.replace('name = "rectangle"', f'name = "{name}"')
+            (folder / f"{name}.toml").write_text(edited.replace("noise = 0.0005", f"noise = {noise}"))
+        folders[copy] = [str(folder / f"{name}.toml") for name in SCENES]
+    outcomes = ["success"] * len(_keys())
+    a = _write_run(tmp_path / "a", _config(scenes=folders["one"]), outcomes)
+    same = _write_run(tmp_path / "b", _config(scenes=folders["same"], physics={"engine": "mujoco"}), outcomes)
+    noisier = _write_run(tmp_path / "c", _config(scenes=folders["noisier"], physics={"engine": "mujoco"}), outcomes)
+    assert main(["compare", str(a), str(same), "--engines"]) == 0
+    capsys.readouterr()
+    assert main(["compare", str(a), str(noisier), "--engines"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "config.scenes" in err and "content differs" in err
+
+
 def test_simulate_writes_mujoco_frames(tmp_path, capsys):
     frames = tmp_path / "frames"
     assert main(["simulate", "rectangle", "--grasp", "-0.045", "0", "0.045", "0", "--trials", "2",
