@@ -54,6 +54,33 @@ def test_prism_mass_properties_match_the_box_closed_form():
     assert abs(props.inertia[0, 1]) < 1e-15 * m
 
 
+def test_prism_mass_properties_of_a_turned_frame_with_a_hole_match_the_closed_form():
+    """A 6 x 4 cm frame (a 4 x 2 cm hole in its middle, the outer box less the inner)
+    turned 30 degrees about a point off its centre: the mass and the centre of mass are
+    the frame's, and the in-plane inertia is R diag(I_xx, I_yy) R^T, with its product of
+    inertia, while I_zz keeps the sum of the two."""
+    t, rho, angle = 0.02, 700.0, np.radians(30.0)
+    outer, inner = (0.06, 0.04), (0.04, 0.02)
+    hole = box(-0.02, -0.01, 0.02, 0.01).exterior.coords
+    frame = shapely.Polygon(box(-0.03, -0.02, 0.03, 0.02).exterior.coords, [hole])
+    turned = shapely.affinity.translate(shapely.affinity.rotate(frame, angle, origin=(0.0, 0.0), use_radians=True),
+                                        0.01, -0.005)
+    props = prism_mass_properties(turned, t, rho)
+    masses = [rho * a * b * t for a, b in (outer, inner)]
+    m = masses[0] - masses[1]
+    assert props.mass == pytest.approx(m, rel=1e-12)
+    np.testing.assert_allclose(props.com, [0.01, -0.005, t / 2], atol=1e-15)
+    # About the centre in the frame's own axes: the outer box's less the hole's.
+    parts = ((1, masses[0], outer), (-1, masses[1], inner))
+    ixx, iyy = (sum(sign * mk * dims[k] ** 2 / 12 for sign, mk, dims in parts) for k in (1, 0))
+    r = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
+    in_plane = r @ np.diag([ixx, iyy]) @ r.T
+    z2 = m * t * t / 12
+    np.testing.assert_allclose(props.inertia[:2, :2], in_plane + z2 * np.eye(2), rtol=1e-10, atol=1e-16)
+    assert abs(in_plane[0, 1]) > 0.1 * ixx  # the turn gives a product of inertia to check
+    assert props.inertia[2, 2] == pytest.approx(ixx + iyy, rel=1e-10)
+
+
 def _rotation(q) -> np.ndarray:
     return np.array(pb.getMatrixFromQuaternion(q)).reshape(3, 3)
 
