@@ -195,3 +195,24 @@ def test_a_plate_that_started_beside_a_wall_it_closed_past_is_found_where_it_sta
     w = (pushed_.g2[0] - pushed_.g1[0]) / np.linalg.norm(pushed_.g2[0] - pushed_.g1[0])
     assert (out.c1[0] - pushed_.g1[0]) @ w == pytest.approx(pushed_.travel[0], abs=TOUCH + 1e-4)
     assert (pushed_.g2[0] - out.c2[0]) @ w == pytest.approx(pushed_.travel[0], abs=TOUCH + 1e-4)
+
+
+def test_a_plate_on_an_inclined_wall_pushes_at_its_edge_along_the_walls_normal():
+    """A head whose upper wall rises at a slope of 0.1 across the plate (1 mm over its 10 mm,
+    past PATCH_DEPTH: an edge contact, though the next plate line is within it, so the
+    patch has a width): the upper plate, nearer, pushes at its edge with the wall's normal,
+    at Lynch's rate for that point and normal (`twist`), not as a flush plate that would
+    pivot the head about the patch's inner end."""
+    head = fields_of(shapely.Polygon([(-0.03, -0.015), (0.03, -0.015), (0.03, 0.018), (-0.03, 0.012)]))
+    com, spread = head.regions.center_of_mass[0], head.regions.spread[0]
+    u = np.array([0.0, 1.0])
+    centre = np.array([0.01, 0.0005])
+    g1, g2 = (centre - 0.045 * u)[None], (centre + 0.045 * u)[None]
+    contacts = find_contacts(head, g1, g2, JAW)
+    assert contacts.edge2[0] == pytest.approx(0.1, rel=1e-9) and contacts.w2[0] > 0
+    out = push(head, g1, g2, 0, contacts, 0.5, JAW)
+    _, rate = twist(contacts.c2 - com, -contacts.n2, -u[None], np.array([0.5]), np.array([spread]))
+    assert out.distance[0] > 0 and out.turn[0] / out.distance[0] == pytest.approx(rate[0], rel=1e-9)
+    inner = np.array([[contacts.c2[0, 0] - contacts.w2[0], contacts.c2[0, 1]]])
+    _, flush = twist(inner - com, -u[None], -u[None], np.array([0.5]), np.array([spread]))
+    assert abs(flush[0] - rate[0]) > 0.2 * abs(rate[0])
