@@ -538,6 +538,36 @@ def test_occluded_cells_are_absent_and_occlusion_beats_transparency(load):
     assert np.any(obs.kind == TRANSPARENT)
 
 
+def test_transparency_beats_specularity_where_their_regions_overlap(load):
+    """A surface cell in both a specular and a transparent region that the sensor keeps is
+    misread as transparent (its kind and noise), not as specular; specular cells outside
+    the transparent region keep their own kind and noise (base^2 + U (2 cells)^2)."""
+    scene = load(BIG_DISK + """
+        [[sensor.regions]]
+        kind = "specular"
+        drop_probability = 0.5
+        noise = "2 cells"
+        half_plane = { normal = [0, 1] }
+        [[sensor.regions]]
+        kind = "transparent"
+        value = "0.5 cells"
+        noise = "1 cells"
+        half_plane = { normal = [1, 0] }
+    """, grid=BIG_DISK_GRID)
+    obs = read(scene, 6)
+    h = 0.2 / 80
+    f = scene.true_sdf.ravel()[obs.cells[:, 0] + 80 * obs.cells[:, 1]]
+    x, y = obs.points[:, 0], obs.points[:, 1]
+    surface = np.abs(f) < scene.sensor.surface_band
+    both, specular = surface & (x > 0) & (y > 0), surface & (x < 0) & (y > 0)
+    assert both.sum() > 20 and specular.sum() > 20
+    assert np.all(obs.kind[both] == TRANSPARENT)
+    np.testing.assert_allclose(obs.noise_var[both], h ** 2, rtol=1e-12)
+    assert np.all(obs.kind[specular] == SPECULAR)
+    base = scene.sensor.noise ** 2
+    assert np.all((obs.noise_var[specular] >= base) & (obs.noise_var[specular] <= base + (2 * h) ** 2))
+
+
 def test_interior_cells_are_kept_with_the_interior_keep_probability(load):
     scene = load(BIG_DISK + "[sensor]\ninterior_keep = 0.3\n", grid=BIG_DISK_GRID)
     deep = scene.true_sdf.ravel() < -scene.sensor.interior_depth
