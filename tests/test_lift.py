@@ -428,7 +428,7 @@ def test_the_smooth_lift_is_the_average_of_the_draws_verdicts():
     from it is folded (|d|). The tolerance is 3 Monte-Carlo standard errors (0.0007 at
     200,000 draws) plus the 3-point Gauss-Hermite rule's own error on these cases (at most
     0.002, against Monte Carlo of 400,000 draws); a rule with equal weights, or with nodes
-    at +-1, is off by 0.006-0.09."""
+    at +-1, is off by 0.005-0.09."""
     scene = load_scene("rectangle")
     settings = resolve(scene)
     rng = np.random.default_rng(9)

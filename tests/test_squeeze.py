@@ -484,7 +484,7 @@ def test_a_turn_that_runs_another_wall_into_a_plates_side_is_held_at_the_step_be
     bar = [(-0.03, -0.01), (0.03, -0.01), (0.03, 0.01), (-0.03, 0.01)]
     toothed = [*bar[:3], (-0.004, 0.01), (-0.004, 0.018), (-0.007, 0.018), (-0.007, 0.01), bar[3]]
     g1, g2 = jaws(math.radians(12.0))
-    plain, shape = fields(bar)
+    plain, _ = fields(bar)
     contacts = find_contacts(plain, g1, g2, JAW)
     closed, _ = plate_closure(contacts, mu, np.zeros(2), 0.05)
     out = squeeze(plain, g1, g2, 0, contacts, closed, mu, JAW, 0.05, slide_limit=0.0)

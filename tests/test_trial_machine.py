@@ -72,8 +72,8 @@ class _Scripted(TrialMachine):
 
 
 def _lost_in(phase: str, checks: int):
-    """Both jaws beyond the lost distance (but within it of nothing) for ``checks``
-    consecutive checks from the first check of ``phase``, held otherwise."""
+    """The object near neither jaw, at any distance asked, at the first ``checks`` checks
+    of ``phase``; near both otherwise."""
     every = PROTOCOL.steps(PROTOCOL.check_interval)
 
     def near(now, tick, distance):
