@@ -372,6 +372,138 @@ def test_the_engines_study_reports_the_runs_own_counts(quick_runs, tmp_path):
     assert text.count("bar 18 x 3 x 3 cm") == 2 and "the lift model's bars in mujoco:" in text
 
 
+def _relabel(folder: Path, outcomes: dict, p_l: dict, moved: tuple | None = None) -> None:
+    """Give a copied run's ledger these trial outcomes ({key: outcome}) and plans' P_L,
+    and move the ``moved`` plan's first jaw by 1 mm."""
+    import sqlite3
+
+    with sqlite3.connect(folder / "ledger.sqlite") as db:
+        if moved is not None:
+            db.execute("UPDATE plans SET g1y = g1y + 0.001 WHERE scene = ? AND realisation = ? AND planner = ?",
+                       moved)
+        db.executemany("UPDATE trials SET outcome = ? WHERE scene = ? AND realisation = ? AND planner = ? "
+                       "AND shapes = ? AND trial = ?", [(o, *k) for k, o in outcomes.items()])
+        db.executemany("UPDATE analytic SET p_l = ? WHERE scene = ? AND realisation = ? AND planner = ?",
+                       [(v, *k) for k, v in p_l.items()])
+
+
+def test_the_engines_study_figures_are_the_trials_own_where_the_engines_part(quick_runs, tmp_path):
+    """The study's every figure (cells and their rms difference, each planner's pooled
+    success and Wilson interval, the rankings and Kendall's tau, the comparisons' verdicts,
+    P_L's Spearman and Brier, trial agreement and the outcomes' cross-table) against the
+    same numbers computed here from the trials, on copies of the quick runs whose
+    outcomes were redrawn so that success varies by plan and the engines part on a fifth
+    of the trials (the quick runs themselves succeed in every trial, where most of these
+    figures cannot fail)."""
+    import shutil
+
+    from scipy import stats
+
+    from harness.bench.engines_study import study
+    from harness.quality import Z95
+
+    dirs = {}
+    for name in ("pb", "mj1"):
+        dirs[name] = tmp_path / name
+        shutil.copytree(quick_runs / name, dirs[name])
+    keys = ["scene", "realisation", "planner", "shapes", "trial"]
+    trials = pd.read_parquet(quick_runs / "pb" / "trials.parquet").sort_values(keys).reset_index(drop=True)
+    plans = sorted(set(map(tuple, trials[["scene", "realisation", "planner"]].to_numpy())))
+    rng = np.random.default_rng(11)
+    rate = {k: 0.95 if k[2] == "gp-gpis-opt" else r for k, r in zip(plans, rng.uniform(0.2, 1.0, len(plans)))}
+    p_l = {k: float(np.clip(rate[k] + rng.normal(0, 0.15), 0, 1)) for k in plans}
+    win_a = np.array([rng.random() < rate[(r.scene, r.realisation, r.planner)] for r in trials.itertuples()])
+    flip = rng.random(len(trials)) < 0.2
+    # B: a fifth of the trials turned, one planner's posterior successes lost (its
+    # comparisons' intervals then lie apart), and some failures another failure.
+    flip |= win_a & (trials.planner == "gp-gpis-opt").to_numpy() & (trials.shapes == "posterior").to_numpy()
+    a = np.where(win_a, "success", "slipped")
+    b = np.where(flip, np.where(win_a, np.where(rng.random(len(trials)) < 0.5, "slipped", "dropped"), "success"), a)
+    b = np.where(~flip & ~win_a & (rng.random(len(trials)) < 0.3), "dropped", b)
+    rows = list(map(tuple, trials[keys].to_numpy()))
+    _relabel(dirs["pb"], dict(zip(rows, a)), p_l)
+    _relabel(dirs["mj1"], dict(zip(rows, b)), p_l, moved=plans[0])
+    t = trials[keys].assign(a=a, b=b, sa=a == "success", sb=b == "success")
+    assert 0 < t.sa.mean() < 1 and (t.a != t.b).any()
+
+    res = study(dirs["pb"], dirs["mj1"])
+    assert res["identical_plans"] == {"paired": 8, "same": 7}
+    # Cells: each engine's success per scene and planner, and the rms of their differences.
+    cell = t.groupby(["scene", "planner", "shapes"])[["sa", "sb"]].mean()
+    for c in res["cells"]:
+        for shapes in ("posterior", "truth"):
+            assert c[shapes] == pytest.approx(list(cell.loc[(c["scene"], c["planner"], shapes)]), abs=1e-12)
+    for shapes in ("posterior", "truth"):
+        d = cell.xs(shapes, level="shapes")
+        assert len(res["cells"]) == len(d) == 8
+        assert res["cell_rms"][shapes] == pytest.approx(float(np.sqrt(((d.sa - d.sb) ** 2).mean())), abs=1e-12)
+    assert res["cell_rms"]["posterior"] > 0.05
+    # Each planner pooled over scenes, with the Wilson interval of its posterior trials.
+    pooled = t.groupby(["planner", "shapes"])[["sa", "sb"]].agg(["sum", "count"])
+    for p in res["planners"]:
+        for k, col in enumerate(("sa", "sb")):
+            post, truth = pooled.loc[(p["planner"], "posterior"), col], pooled.loc[(p["planner"], "truth"), col]
+            assert p["posterior"][k] == pytest.approx(post["sum"] / post["count"], abs=1e-12)
+            assert p["truth"][k] == pytest.approx(truth["sum"] / truth["count"], abs=1e-12)
+            n, s = post["count"], post["sum"] / post["count"]
+            centre, half = (s + Z95**2 / (2 * n)), Z95 * math.sqrt(s * (1 - s) / n + Z95**2 / (4 * n * n))
+            assert p["posterior_ci"][k] == pytest.approx([(centre - half) / (1 + Z95**2 / n),
+                                                          (centre + half) / (1 + Z95**2 / n)], abs=1e-9)
+    # Rankings: per scene and pooled, each engine's order by posterior success, and
+    # Kendall's tau between the engines' successes.
+    post = t[t.shapes == "posterior"]
+    for scene, r in res["ranking"].items():
+        g = post if scene == "all" else post[post.scene == scene]
+        rates = g.groupby("planner")[["sa", "sb"]].mean()
+        tau = stats.kendalltau(rates.sa, rates.sb).statistic
+        assert (r["tau"] is None and math.isnan(tau)) or r["tau"] == pytest.approx(tau, abs=1e-12)
+        for k, col in enumerate(("sa", "sb")):
+            order = list(rates[col].loc[r["order"][k]])
+            assert sorted(r["order"][k]) == sorted(rates.index) and order == sorted(order, reverse=True)
+    per_scene = [r["tau"] for s, r in res["ranking"].items() if s != "all" and r["tau"] is not None]
+    assert res["kendall_tau_per_scene"] == {"mean": pytest.approx(float(np.mean(per_scene)), abs=1e-12),
+                                            "min": pytest.approx(min(per_scene), abs=1e-12),
+                                            "scenes": len(per_scene)}
+    # Comparisons pooled over scenes: each engine's paired difference on the same trials,
+    # the verdict its interval gives, its sign and whether the two intervals overlap.
+    assert res["comparisons"]
+    for c in res["comparisons"]:
+        g = t if c["shapes"] == "all" else t[t.shapes == c["shapes"]]
+        wide = g.pivot_table(index=["scene", "realisation", "shapes", "trial"], columns="planner",
+                             values=["sa", "sb"], aggfunc="first")
+        for k, col in enumerate(("sa", "sb")):
+            direct = (wide[col][c["planner"]].astype(float) - wide[col][c["versus"]].astype(float)).mean()
+            assert c["difference"][k] == pytest.approx(direct, abs=1e-12)
+            lo, hi = c["ci"][k]
+            assert c["verdict"][k] == ("+" if lo > 0 else "-" if hi < 0 else "0")
+        assert c["same_sign"] == (np.sign(c["difference"][0]) == np.sign(c["difference"][1]))
+        assert c["same_verdict"] == (c["verdict"][0] == c["verdict"][1])
+        (la, ha), (lb, hb) = c["ci"]
+        assert c["intervals_overlap"] == (max(la, lb) <= min(ha, hb))
+    assert {c["verdict"][0] for c in res["comparisons"]} != {"0"}
+    assert {c["intervals_overlap"] for c in res["comparisons"]} == {True, False}
+    assert {c["same_sign"] for c in res["comparisons"]} == {True, False}
+    # P_L against each engine: Spearman over plans, Brier over posterior trials.
+    est = post.assign(p=[p_l[(r.scene, r.realisation, r.planner)] for r in post.itertuples()])
+    for name, col in (("pybullet", "sa"), ("mujoco", "sb")):
+        per_plan = est.groupby(["scene", "realisation", "planner"]).agg(p=("p", "first"), s=(col, "mean"))
+        cal = res["calibration"][name]["p_l"]
+        assert cal["spearman"] == pytest.approx(stats.spearmanr(per_plan.p, per_plan.s).statistic, abs=1e-12)
+        assert cal["brier"] == pytest.approx(float(((est.p - est[col]) ** 2).mean()), abs=1e-12)
+        assert cal["success_rate"] == pytest.approx(float(est[col].mean()), abs=1e-12)
+        assert cal["mean_estimate"] == pytest.approx(float(per_plan.p.mean()), abs=1e-12)
+    assert res["calibration"]["pybullet"]["p_l"]["brier"] != res["calibration"]["mujoco"]["p_l"]["brier"]
+    # Trial by trial: the same outcome, the same success, and the cross-table's counts.
+    for shapes, g in t.groupby("shapes"):
+        assert res["trial_agreement"][shapes] == pytest.approx(float((g.a == g.b).mean()), abs=1e-12)
+        assert res["success_agreement"][shapes] == pytest.approx(float((g.sa == g.sb).mean()), abs=1e-12)
+    assert res["trial_agreement"]["all"] == pytest.approx(float((t.a == t.b).mean()), abs=1e-12)
+    table = res["outcomes"]["table"]
+    counts = t.groupby(["a", "b"]).size()
+    assert {(ra, cb): n for ra, row in table.items() for cb, n in row.items() if n} == dict(counts)
+    assert {("success", "dropped"), ("slipped", "success"), ("slipped", "dropped")} <= set(dict(counts))
+
+
 def test_mujocos_runaway_check_reads_the_centre_of_mass_speed_as_bullets_does():
     """A free joint's linear velocity is its frame origin's (the polygon's origin), not the
     centre of mass's, which Bullet's base velocity gives. On a rectangle shifted 4 cm from
