@@ -94,7 +94,8 @@ def test_the_jaws_squeeze_with_the_force_limit_and_the_pad_has_its_stiffness():
 def test_the_model_carries_the_prism_and_the_pad_torsion():
     """The object's mass and principal inertia are the exact prism's (bodies.py's closed
     form); the plates' torsional coefficient is (2/3) mu PAD_RADIUS, a disc's under
-    uniform pressure; jaw contacts have condim 4, the table's 3; the elliptic cone."""
+    uniform pressure; jaw contacts have condim 4, the table's 3; the elliptic cone; the
+    gripper's links weigh what Bullet's do."""
     scene = load_scene("marker")
     trial = make_trials(resolve(scene), [(0.03, -0.01), (0.02, 0.03)], [truth_polygon(scene)], np.zeros((1, 2, 2)))[0]
     slot = me._Slot(me.MujocoRunner(MUJOCO), trial)
@@ -113,6 +114,44 @@ def test_the_model_carries_the_prism_and_the_pad_torsion():
     assert m.geom_condim[m.geom("table").id] == me.TABLE_CONDIM == 3
     assert m.opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC
     assert m.opt.timestep == ENGINE_DEFAULTS["mujoco"]["time_step"]
+    # The same gripper as Bullet's: the palm's and each plate's mass as pybullet loads
+    # them from the gripper's URDF, and the plates' inertia. The palm's inertia is the
+    # URDF's box in MuJoCo; pybullet computes its base's from the collision box grown by
+    # its 1 mm margin on every side (4-21 % larger moments: docs/physics.md, "MuJoCo").
+    import pybullet as pb
+
+    from harness.physics.gripper import PALM_MASS, PALM_THICKNESS
+
+    c = pb.connect(pb.DIRECT)
+    try:
+        grip = pb.loadURDF(trial.gripper.urdf, physicsClientId=c)
+        bullet = [pb.getDynamicsInfo(grip, link, physicsClientId=c)[:3:2] for link in (-1, *trial.gripper.jaw_links)]
+    finally:
+        pb.disconnect(physicsClientId=c)
+    bodies = [slot.layout.palm, *(int(m.geom_bodyid[g]) for g in slot.jaw_geoms)]
+    for k, (body, (mass, inertia)) in enumerate(zip(bodies, bullet)):
+        assert m.body_mass[body] == pytest.approx(mass, rel=1e-6)
+        if k:
+            assert m.body_inertia[body] == pytest.approx(inertia, rel=1e-6)
+    g = trial.gripper
+    box = [g.face_at_zero[1] * 2 + 2 * g.pad_thickness, max(g.pad_width, 0.02), PALM_THICKNESS]
+
+    def moments(a, b, h):
+        return sorted(PALM_MASS / 12 * np.array([b * b + h * h, a * a + h * h, a * a + b * b]))
+
+    assert sorted(m.body_inertia[slot.layout.palm]) == pytest.approx(moments(*box), rel=1e-9)
+    assert sorted(bullet[0][1]) == pytest.approx(moments(*(x + 0.002 for x in box)), rel=1e-6)
+
+
+def test_the_palm_stands_at_its_target_while_the_jaws_hold_the_object_on_the_table():
+    """The gripper's own weight does not pull the palm off its target (the weld carries
+    the path, not the gripper's weight, as Bullet's base constraint does): once the jaws
+    have closed on the rectangle at rest on the table, the palm's frame is within 1 um of
+    the mocap target (with the gripper weighing on the weld it sags 0.1 mm and more)."""
+    slot = _closed_slot(_rectangle_trials((-0.045, 0.0), (0.045, 0.0))[0])
+    mujoco.mj_step(slot.model, slot.data, 50)
+    mujoco.mj_kinematics(slot.model, slot.data)
+    assert slot.data.xpos[slot.layout.palm] == pytest.approx(slot.mocap_pos, abs=1e-6)
 
 
 def test_a_trial_is_the_same_alone_in_a_batch_and_twice():
@@ -168,6 +207,11 @@ def test_the_mujoco_engine_refuses_a_gripper_it_cannot_build():
     other = replace(trial, gripper=replace(trial.gripper, urdf="/robots/franka_hand.urdf"))
     with pytest.raises(ValueError, match="built-in parallel-jaw gripper"):
         make_runner(MUJOCO).run([other])
+    # The built-in URDF driven another way (its jaws' joints read with the other sign, or
+    # closing along y) is not the gripper MuJoCo builds either.
+    for changed in ({"face_per_unit": (-1.0, 1.0)}, {"closing_axis": (0.0, 1.0)}):
+        with pytest.raises(ValueError, match="built-in parallel-jaw gripper"):
+            make_runner(MUJOCO).run([replace(trial, gripper=replace(trial.gripper, **changed))])
 
 
 def test_the_engine_is_a_physics_setting(tmp_path, capsys):

@@ -10,6 +10,8 @@ import numpy as np
 import pybullet as pb
 import pytest
 
+from dataclasses import replace
+
 from harness.canonical import canonical
 from harness.physics.simulate import make_trials, truth_polygon
 from harness.physics.engines import make_runner
@@ -294,8 +296,16 @@ def test_a_light_thin_bar_is_held_at_the_finer_step_bullets_solver_needs(monkeyp
     from harness.physics import bullet
 
     trials = _light_bar_trials(300.0)
+    steps, run_world = [], bullet.BulletRunner._run_world
+
+    def spy(self, batch, slots, protocol, *args, **kwargs):
+        steps.append(protocol.time_step)
+        return run_world(self, batch, slots, protocol, *args, **kwargs)
+
+    monkeypatch.setattr(bullet.BulletRunner, "_run_world", spy)
     with make_runner(Protocol()) as runner:
         assert [r.outcome for r in runner.run(trials)] == ["success"] * 2
+    assert steps == [Protocol().time_step / bullet.LIGHT_REFINE]  # one world, the finer step
     with make_runner(Protocol.of("mujoco")) as runner:
         assert [r.outcome for r in runner.run(trials)] == ["success"] * 2
     monkeypatch.setattr(bullet, "LIGHT_FRACTION", 0.0)
@@ -380,3 +390,119 @@ def test_compliant_pads_turn_a_bar_where_a_uniformly_pressed_pad_does():
     assert turned(0.8, Protocol()) <= 1
     assert turned(1.2, Protocol()) >= 7
     assert turned(0.8, Protocol(pad_stiffness=0.0)) >= 4
+
+
+def _slot(engine: str, trial, protocol=None):
+    """A trial's slot in a world of its own, placed and not yet stepped."""
+    import harness.physics.bullet as bullet
+    import harness.physics.mujoco_engine as me
+
+    protocol = protocol or Protocol.of(engine)
+    if engine == "mujoco":
+        return me._Slot(me.MujocoRunner(protocol), trial)
+    runner = bullet.BulletRunner(protocol)
+    runner._reset_world(protocol)
+    return bullet._Slot(runner, 0, trial, (0.0, 0.0), protocol, None)
+
+
+def _set(slot, jaws=None, velocity=None, lift=None, turn=None) -> None:
+    """Put a slot's jaws (joint positions), the object's velocity (linear, angular) or its
+    pose (raised by ``lift``, MuJoCo's turned by ``turn`` about the world's y axis through
+    its frame's origin) where a query can read them."""
+    if hasattr(slot, "data"):  # MuJoCo
+        d = slot.data
+        if jaws is not None:
+            for k in range(2):
+                d.qpos[slot.finger_qpos[k]] = jaws[k]
+        if velocity is not None:
+            slot.obj_velocity[:] = velocity
+        if lift is not None or turn is not None:
+            slot.obj_position[2] += lift or 0.0
+            a = 0.5 * (turn or 0.0)
+            slot.obj_turn[:] = (math.cos(a), 0.0, math.sin(a), 0.0)
+        slot.fresh = False
+        return
+    c = slot.runner.client
+    if jaws is not None:
+        for joint, q in zip(slot.trial.gripper.finger_joints, jaws):
+            pb.resetJointState(slot.grip, joint, q, physicsClientId=c)
+    if velocity is not None:
+        pb.resetBaseVelocity(slot.obj, velocity[:3], velocity[3:], physicsClientId=c)
+    if lift is not None:
+        (x, y, z), orn = pb.getBasePositionAndOrientation(slot.obj, physicsClientId=c)
+        pb.resetBasePositionAndOrientation(slot.obj, (x, y, z + lift), orn, physicsClientId=c)
+    pb.performCollisionDetection(physicsClientId=c)
+
+
+@pytest.mark.parametrize("engine", ["pybullet", "mujoco"])
+def test_each_engine_answers_the_machines_questions_on_placed_states(engine):
+    """The queries that decide a trial's outcome, asked of states set by hand (the
+    rectangle, 3 cm thick, placed for a grasp across its long faces): the jaws are shut
+    only when both stand at their limits; the object's height is its centre of mass's,
+    half the thickness above the table at rest; it touches the table at rest and not 2 mm
+    above it (the held distance is 1 mm); a speed or a spin past the protocol's limit, with
+    the other at rest, is a blown-up simulation and 0.9 of either is not."""
+    trial = _rectangle_trial((0.0, -0.045), (0.0, 0.045))
+    protocol = Protocol.of(engine)
+    slot = _slot(engine, trial, protocol)
+    limits = slot.limits
+    _set(slot, jaws=limits)
+    assert slot.jaws_shut(slot.jaw_states())
+    for k in range(2):
+        _set(slot, jaws=[limits[j] if j == k else 0.5 * limits[j] for j in range(2)])
+        assert not slot.jaws_shut(slot.jaw_states())
+    # Jaws at the long faces (1.5 cm either side of the grasp centre), one pressing 0.1
+    # mm into its face, the other on its face or 1 cm off it.
+    g = trial.gripper
+    for off, near in ((0.0, 2), (0.01, 1)):
+        _set(slot, jaws=[g.joint_position(0, -0.0149), g.joint_position(1, 0.015 + off)])
+        assert [slot.near_jaws(protocol.held_distance), slot.near_jaws(0.005)] == [near, near]
+    assert slot.object_height_and_yaw()[0] == pytest.approx(0.5 * trial.thickness, abs=2e-4)
+    assert slot.on_table()
+    _set(slot, lift=0.002)
+    assert not slot.on_table()
+    for limit, velocity in ((protocol.max_speed, (1.0, 0, 0, 0, 0, 0)), (protocol.max_spin, (0, 0, 0, 0, 0, 1.0))):
+        for factor, blown in ((1.1, True), (0.9, False)):
+            _set(slot, velocity=np.array(velocity) * limit * factor)
+            assert slot.blew_up() == blown
+    _set(slot, velocity=np.zeros(6))
+    assert not slot.blew_up()
+
+
+def test_mujocos_table_contact_is_any_piece_of_an_object_without_a_foot():
+    """Without the foot (``table_hull = False``) every convex piece may meet the table: an
+    L (a 10 x 1 cm bar and a 1 x 2 cm stub on its end: two pieces, the bar and the
+    bar's last centimetre with the stub), tilted 0.1 rad about the vertical plane's
+    across axis so that the bar's other end lies on the table and the stub's piece
+    stands 9 mm above it and more, touches the table; raised 2 mm, it does not."""
+    from shapely.geometry import Polygon
+
+    from harness.physics.bodies import convex_pieces
+
+    shape = Polygon([(-0.05, -0.005), (0.05, -0.005), (0.05, 0.025), (0.04, 0.025), (0.04, 0.005), (-0.05, 0.005)])
+    assert [p.bounds[0] for p in convex_pieces(shape)] == pytest.approx([-0.05, 0.04])
+    scene = load_scene("rectangle")
+    settings = resolve(scene, {"sigma_g": 0.0})
+    trial = make_trials(settings, [(0.0, -0.03), (0.0, 0.03)], [shape], np.zeros((1, 2, 2)))[0]
+    slot = _slot("mujoco", trial, replace(Protocol.of("mujoco"), table_hull=False))
+    _set(slot, lift=0.05 * math.sin(0.1), turn=-0.1)  # the bar's end at x = -5 cm on the table
+    assert slot.on_table()
+    _set(slot, lift=0.002)
+    assert not slot.on_table()
+
+
+def test_in_bullet_the_foot_alone_meets_the_table_and_the_gripper_never_does():
+    """The rectangle at rest on the table touches it through its foot (every contact
+    point's link on the object is the foot's), and the gripper lowered 3 mm, its plates 2
+    mm into the table, has no contact with it (docs/physics.md, "The foot")."""
+    trial = _rectangle_trial((0.0, -0.045), (0.0, 0.045))
+    slot = _slot("pybullet", trial)
+    c, table = slot.runner.client, slot.runner.table
+    pb.performCollisionDetection(physicsClientId=c)
+    points = pb.getContactPoints(slot.obj, table, physicsClientId=c)
+    assert slot.foot is not None and points and {p[3] for p in points} == {slot.foot}
+    (x, y, z), orn = pb.getBasePositionAndOrientation(slot.grip, physicsClientId=c)
+    pb.resetBasePositionAndOrientation(slot.grip, (x, y, z - 0.003), orn, physicsClientId=c)
+    pb.performCollisionDetection(physicsClientId=c)
+    assert pb.getClosestPoints(slot.grip, table, 0.0, physicsClientId=c)  # the plates are in the table
+    assert not pb.getContactPoints(slot.grip, table, physicsClientId=c)
