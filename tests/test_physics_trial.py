@@ -5,12 +5,12 @@ calibration grasps, the unstable outcome, the friction law, and determinism. The
 from __future__ import annotations
 
 import math
+from contextlib import contextmanager
+from dataclasses import replace
 
 import numpy as np
 import pybullet as pb
 import pytest
-
-from dataclasses import replace
 
 from harness.canonical import canonical
 from harness.physics.simulate import make_trials, truth_polygon
@@ -392,17 +392,20 @@ def test_compliant_pads_turn_a_bar_where_a_uniformly_pressed_pad_does():
     assert turned(0.8, Protocol(pad_stiffness=0.0)) >= 4
 
 
-def _slot(engine: str, trial, protocol=None):
-    """A trial's slot in a world of its own, placed and not yet stepped."""
+@contextmanager
+def _placed(engine: str, trial, protocol=None):
+    """A trial's slot in a world of its own, placed and not yet stepped; the runner
+    closed (its pybullet client disconnected) afterwards."""
     import harness.physics.bullet as bullet
     import harness.physics.mujoco_engine as me
 
     protocol = protocol or Protocol.of(engine)
-    if engine == "mujoco":
-        return me._Slot(me.MujocoRunner(protocol), trial)
-    runner = bullet.BulletRunner(protocol)
-    runner._reset_world(protocol)
-    return bullet._Slot(runner, 0, trial, (0.0, 0.0), protocol, None)
+    with make_runner(protocol) as runner:
+        if engine == "mujoco":
+            yield me._Slot(runner, trial)
+        else:
+            runner._reset_world(protocol)
+            yield bullet._Slot(runner, 0, trial, (0.0, 0.0), protocol, None)
 
 
 def _set(slot, jaws=None, velocity=None, lift=None, turn=None) -> None:
@@ -438,13 +441,19 @@ def _set(slot, jaws=None, velocity=None, lift=None, turn=None) -> None:
 def test_each_engine_answers_the_machines_questions_on_placed_states(engine):
     """The queries that decide a trial's outcome, asked of states set by hand (the
     rectangle, 3 cm thick, placed for a grasp across its long faces): the jaws are shut
-    only when both stand at their limits; the object's height is its centre of mass's,
+    only when both stand at their limits; a jaw on its face is near the object and one 1
+    cm off it is not, whether the other touches or not (Bullet's contact manifold proves
+    one jaw near, not both); the object's height is its centre of mass's,
     half the thickness above the table at rest; it touches the table at rest and not 2 mm
     above it (the held distance is 1 mm); a speed or a spin past the protocol's limit, with
     the other at rest, is a blown-up simulation and 0.9 of either is not."""
     trial = _rectangle_trial((0.0, -0.045), (0.0, 0.045))
     protocol = Protocol.of(engine)
-    slot = _slot(engine, trial, protocol)
+    with _placed(engine, trial, protocol) as slot:
+        _ask_placed(slot, trial, protocol)
+
+
+def _ask_placed(slot, trial, protocol) -> None:
     limits = slot.limits
     _set(slot, jaws=limits)
     assert slot.jaws_shut(slot.jaw_states())
@@ -472,9 +481,9 @@ def test_each_engine_answers_the_machines_questions_on_placed_states(engine):
 def test_mujocos_table_contact_is_any_piece_of_an_object_without_a_foot():
     """Without the foot (``table_hull = False``) every convex piece may meet the table: an
     L (a 10 x 1 cm bar and a 1 x 2 cm stub on its end: two pieces, the bar and the
-    bar's last centimetre with the stub), tilted 0.1 rad about the vertical plane's
-    across axis so that the bar's other end lies on the table and the stub's piece
-    stands 9 mm above it and more, touches the table; raised 2 mm, it does not."""
+    bar's last centimetre with the stub), tilted 0.1 rad about the y axis so that the
+    bar's other end lies on the table and the stub's piece stands 9 mm above it and more,
+    touches the table; raised 2 mm, it does not."""
     from shapely.geometry import Polygon
 
     from harness.physics.bodies import convex_pieces
@@ -484,11 +493,11 @@ def test_mujocos_table_contact_is_any_piece_of_an_object_without_a_foot():
     scene = load_scene("rectangle")
     settings = resolve(scene, {"sigma_g": 0.0})
     trial = make_trials(settings, [(0.0, -0.03), (0.0, 0.03)], [shape], np.zeros((1, 2, 2)))[0]
-    slot = _slot("mujoco", trial, replace(Protocol.of("mujoco"), table_hull=False))
-    _set(slot, lift=0.05 * math.sin(0.1), turn=-0.1)  # the bar's end at x = -5 cm on the table
-    assert slot.on_table()
-    _set(slot, lift=0.002)
-    assert not slot.on_table()
+    with _placed("mujoco", trial, replace(Protocol.of("mujoco"), table_hull=False)) as slot:
+        _set(slot, lift=0.05 * math.sin(0.1), turn=-0.1)  # the bar's end at x = -5 cm on the table
+        assert slot.on_table()
+        _set(slot, lift=0.002)
+        assert not slot.on_table()
 
 
 def test_in_bullet_the_foot_alone_meets_the_table_and_the_gripper_never_does():
@@ -496,13 +505,13 @@ def test_in_bullet_the_foot_alone_meets_the_table_and_the_gripper_never_does():
     point's link on the object is the foot's), and the gripper lowered 3 mm, its plates 2
     mm into the table, has no contact with it (docs/physics.md, "The foot")."""
     trial = _rectangle_trial((0.0, -0.045), (0.0, 0.045))
-    slot = _slot("pybullet", trial)
-    c, table = slot.runner.client, slot.runner.table
-    pb.performCollisionDetection(physicsClientId=c)
-    points = pb.getContactPoints(slot.obj, table, physicsClientId=c)
-    assert slot.foot is not None and points and {p[3] for p in points} == {slot.foot}
-    (x, y, z), orn = pb.getBasePositionAndOrientation(slot.grip, physicsClientId=c)
-    pb.resetBasePositionAndOrientation(slot.grip, (x, y, z - 0.003), orn, physicsClientId=c)
-    pb.performCollisionDetection(physicsClientId=c)
-    assert pb.getClosestPoints(slot.grip, table, 0.0, physicsClientId=c)  # the plates are in the table
-    assert not pb.getContactPoints(slot.grip, table, physicsClientId=c)
+    with _placed("pybullet", trial) as slot:
+        c, table = slot.runner.client, slot.runner.table
+        pb.performCollisionDetection(physicsClientId=c)
+        points = pb.getContactPoints(slot.obj, table, physicsClientId=c)
+        assert slot.foot is not None and points and {p[3] for p in points} == {slot.foot}
+        (x, y, z), orn = pb.getBasePositionAndOrientation(slot.grip, physicsClientId=c)
+        pb.resetBasePositionAndOrientation(slot.grip, (x, y, z - 0.003), orn, physicsClientId=c)
+        pb.performCollisionDetection(physicsClientId=c)
+        assert pb.getClosestPoints(slot.grip, table, 0.0, physicsClientId=c)  # the plates are in the table
+        assert not pb.getContactPoints(slot.grip, table, physicsClientId=c)
