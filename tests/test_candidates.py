@@ -63,3 +63,57 @@ def test_candidates_start_one_clearance_beyond_the_mean_shape_along_every_plate_
                 inside = values.reshape(len(grasps), len(ts)) <= 0
                 first = np.minimum(first, np.where(inside.any(axis=1), ts[np.argmax(inside, axis=1)], np.inf))
             assert np.all(first > gap - 2 * step) and np.all(first <= gap + 2.5e-4), name
+
+
+def _keyed_score(values, ties, floors=None):
+    """A score that gives candidate i (recognised by its first jaw's x) the pair
+    (values[i], ties[i]) and, when bounded, records the floor it was called with."""
+    index = {}
+
+    def score(grasps, state, **kwargs):
+        if floors is not None:
+            floors.append(kwargs["floor"])
+        k = [index[float(g[0, 0])] for g in grasps]
+        return values[k], ties[k]
+
+    return index, score
+
+
+def test_the_search_keeps_the_first_candidate_of_the_highest_value_and_tie_break(beliefs, monkeypatch):
+    """``planners.sampling.search`` over 60 candidates with many equal scores (values in
+    five levels, tie-breaks in three; the highest pair twice, after lesser tie-breaks of
+    its value in its own chunk and an earlier one): the plan is the first candidate, in the
+    candidates' order, of the largest (value, tie-break) pair, found here by a plain
+    scan; a bounded search calls the score with the best value so far as its floor
+    (-inf first); a search over its time budget stops after its first chunk of ten with
+    status "budget"."""
+    from planners import sampling
+    from planners.base import Problem
+
+    belief = beliefs("rectangle")
+    problem = Problem.for_belief(belief, resolve(belief.scene))
+    rng = np.random.default_rng(3)
+    grasps = cand.generate(belief, 60, stream(0, "test-search"), problem.settings, math.radians(10.0))
+    values = rng.integers(0, 4, len(grasps)).astype(float)
+    ties = rng.integers(0, 3, len(grasps)).astype(float)
+    # The best (4, 2) first at 23, again at 47; lesser ties of the same value before it,
+    # in its chunk of ten and in the first.
+    for i, pair in ((5, (4, 0)), (21, (4, 1)), (23, (4, 2)), (47, (4, 2))):
+        values[i], ties[i] = pair
+    monkeypatch.setattr(cand, "generate", lambda *args, **kwargs: grasps)
+    best = max(range(len(grasps)), key=lambda i: (values[i], ties[i], -i))
+    assert best == 23
+    for bounded in (False, True):
+        floors = []
+        index, score = _keyed_score(values, ties, floors if bounded else None)
+        index.update({float(g[0, 0]): i for i, g in enumerate(grasps)})
+        plan = sampling.search(problem, rng, len(grasps), 10.0, score, bounded=bounded, fixed_chunks=True)
+        assert plan.status == "ok" and plan.iterations == len(grasps)
+        assert np.allclose(plan.grasp.g1, grasps[best, 0]) and np.allclose(plan.grasp.g2, grasps[best, 1])
+        if bounded:
+            chunks = [values[:k].max() for k in range(10, len(grasps), 10)]
+            assert floors == [-np.inf, *chunks]
+    index, score = _keyed_score(values, ties)
+    index.update({float(g[0, 0]): i for i, g in enumerate(grasps)})
+    plan = sampling.search(Problem.for_belief(belief, resolve(belief.scene), 1e-9), rng, len(grasps), 10.0, score)
+    assert plan.status == "budget" and plan.iterations == sampling.CHUNK

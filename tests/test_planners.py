@@ -138,6 +138,21 @@ def test_gp_gpis_opt_lift_surrogate_follows_the_plates_squeeze_on_the_mean_shape
     assert (cone_lift <= 0).all() and (cone_closure[0] > 0.2).all() and (cone_closure[1] <= 0).all()
 
 
+def test_mean_shape_lift_scores_a_grasp_the_squeeze_brings_into_closure(beliefs):
+    """The rectangle's tilted grasp of the test above (12 degrees off the long faces'
+    normal, friction 0.1): out of force closure at its first contacts (Ferrari-Canny 0,
+    the tie-break), and the plates' squeeze turns it flush, where the light box hangs for
+    certain: mean-shape-lift scores it about 1 (the lift on the mean shape where the
+    squeeze settles it), as P_L does; the grasp square to the faces too."""
+    belief = beliefs("rectangle")
+    problem = Problem.for_belief(belief, resolve(belief.scene, {"sigma_g": 0.001, "friction": 0.1}))
+    planner = MeanShape(quality="lift")
+    u = np.array([[math.sin(math.radians(a)), math.cos(math.radians(a))] for a in (12.0, 0.0)])
+    jaws = np.stack([-0.04 * u, 0.04 * u], axis=1)
+    lift, quality = planner._score(jaws, planner._setup(problem, None))
+    assert lift[0] >= 0.95 and quality[0] == 0.0
+    assert lift[1] >= 0.95 and quality[1] > 0.0
+
 class _Outside(Planner):
     name = "outside"
     description = "returns a grasp outside the grid"
