@@ -65,10 +65,10 @@ def test_candidates_start_one_clearance_beyond_the_mean_shape_along_every_plate_
             assert np.all(first > gap - 2 * step) and np.all(first <= gap + 2.5e-4), name
 
 
-def _keyed_score(values, ties, floors=None):
-    """A score that gives candidate i (recognised by its first jaw's x) the pair
-    (values[i], ties[i]) and, when bounded, records the floor it was called with."""
-    index = {}
+def _keyed_score(candidates, values, ties, floors=None):
+    """A score that gives candidate i of ``candidates`` (recognised by its first jaw's x)
+    the pair (values[i], ties[i]) and, when bounded, records the floor it was called with."""
+    index = {float(g[0, 0]): i for i, g in enumerate(candidates)}
 
     def score(grasps, state, **kwargs):
         if floors is not None:
@@ -76,7 +76,7 @@ def _keyed_score(values, ties, floors=None):
         k = [index[float(g[0, 0])] for g in grasps]
         return values[k], ties[k]
 
-    return index, score
+    return score
 
 
 def test_the_search_keeps_the_first_candidate_of_the_highest_value_and_tie_break(beliefs, monkeypatch):
@@ -105,15 +105,13 @@ def test_the_search_keeps_the_first_candidate_of_the_highest_value_and_tie_break
     assert best == 23
     for bounded in (False, True):
         floors = []
-        index, score = _keyed_score(values, ties, floors if bounded else None)
-        index.update({float(g[0, 0]): i for i, g in enumerate(grasps)})
+        score = _keyed_score(grasps, values, ties, floors if bounded else None)
         plan = sampling.search(problem, rng, len(grasps), 10.0, score, bounded=bounded, fixed_chunks=True)
         assert plan.status == "ok" and plan.iterations == len(grasps)
         assert np.allclose(plan.grasp.g1, grasps[best, 0]) and np.allclose(plan.grasp.g2, grasps[best, 1])
         if bounded:
             chunks = [values[:k].max() for k in range(10, len(grasps), 10)]
             assert floors == [-np.inf, *chunks]
-    index, score = _keyed_score(values, ties)
-    index.update({float(g[0, 0]): i for i, g in enumerate(grasps)})
-    plan = sampling.search(Problem.for_belief(belief, resolve(belief.scene), 1e-9), rng, len(grasps), 10.0, score)
+    plan = sampling.search(Problem.for_belief(belief, resolve(belief.scene), 1e-9), rng, len(grasps), 10.0,
+                           _keyed_score(grasps, values, ties))
     assert plan.status == "budget" and plan.iterations == sampling.CHUNK

@@ -143,7 +143,7 @@ def test_mean_shape_lift_scores_a_grasp_the_squeeze_brings_into_closure(beliefs)
     normal, friction 0.1): out of force closure at its first contacts (Ferrari-Canny 0,
     the tie-break), and the plates' squeeze turns it flush, where the light box hangs for
     certain: mean-shape-lift scores it about 1 (the lift on the mean shape where the
-    squeeze settles it), as P_L does; the grasp square to the faces too."""
+    squeeze settles it); the grasp square to the faces too."""
     belief = beliefs("rectangle")
     problem = Problem.for_belief(belief, resolve(belief.scene, {"sigma_g": 0.001, "friction": 0.1}))
     planner = MeanShape(quality="lift")

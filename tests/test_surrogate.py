@@ -28,13 +28,13 @@ def _certain(objective: SurrogateObjective) -> SurrogateObjective:
     return objective
 
 
-def _disk_grasp(belief, angle: float, offset: float) -> tuple[np.ndarray, np.ndarray]:
-    """Jaw starts (2, 2) 4.5 cm either side of a point ``offset`` off the disk's centre of
-    mass across the closing line at ``angle``, and the unit vector across that line."""
+def _grasp_across(belief, angle: float, offset: float, half: float = 0.045) -> tuple[np.ndarray, np.ndarray]:
+    """Jaw starts (2, 2) ``half`` either side of a point ``offset`` off the belief's centre
+    of mass across the closing line at ``angle``, and the unit vector across that line."""
     u = np.array([math.cos(angle), math.sin(angle)])
     perp = np.array([-u[1], u[0]])
     c = belief.center_of_mass + offset * perp
-    return np.stack([c - 0.045 * u, c + 0.045 * u]), perp
+    return np.stack([c - half * u, c + half * u]), perp
 
 
 @pytest.mark.parametrize("offset", [0.002, 0.004])
@@ -53,7 +53,7 @@ def test_the_sigma_points_integrate_the_hold_over_the_approach_noise(beliefs, of
         Problem.for_belief(belief, resolve(belief.scene, {"sigma_g": sigma, "friction": 0.2})), 0.0, TEMPERATURE))
     exact = _certain(SurrogateObjective(
         Problem.for_belief(belief, resolve(belief.scene, {"sigma_g": 0.0, "friction": 0.2})), 0.0, TEMPERATURE))
-    jaws, perp = _disk_grasp(belief, 0.4, offset)
+    jaws, perp = _grasp_across(belief, 0.4, offset)
     nodes, weights = np.polynomial.hermite_e.hermegauss(40)
     weights = weights / weights.sum()
     e1, e2 = (e.ravel() for e in np.meshgrid(nodes, nodes, indexing="ij"))
@@ -87,9 +87,7 @@ def test_the_penalty_and_the_cones_read_the_gps_own_posterior_at_the_contacts(be
     gp = belief.gp
     checked = both = 0
     for angle, offset in ((0.0, 0.0), (2.09, 0.0), (2.09, 0.006), (2.09, -0.01), (1.57, 0.006)):
-        u = np.array([math.cos(angle), math.sin(angle)])
-        c = belief.center_of_mass + offset * np.array([-u[1], u[0]])
-        jaws = np.stack([c - 0.06 * u, c + 0.06 * u])
+        jaws, _ = _grasp_across(belief, angle, offset, half=0.06)
         x = jaws.reshape(1, 4) / penalised.h
         found = find_contacts(belief.mean_field, jaws[None, 0], jaws[None, 1], settings.jaw_width)
         contacts = np.stack([found.c1[0], found.c2[0]])
